@@ -1,0 +1,117 @@
+"""Random adversaries: the paper's random disturbance mode, and the no-op."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from advgame.errors import ConfigError
+from advgame.policy import AgentInfo, ConstantPolicy, Policy
+
+__all__ = ["GaussianAdversary", "UniformAdversary", "ZeroAdversary"]
+
+
+@dataclass(frozen=True)
+class ZeroAdversary:
+    """The no-op adversary: its disruptor leaves the task unchanged (the nominal game).
+
+    Example:
+        >>> import advgame
+        >>> game = advgame.make("Hopper-v5")
+        >>> ZeroAdversary().build(game.agent_info("observation_adversary")).act(None)
+        array([0., 0., 0., 0., 0., 0., 0., 0., 0., 0., 0.], dtype=float32)
+    """
+
+    def build(self, info: AgentInfo) -> Policy:
+        """A constant policy sending the disruptor's identity action."""
+        return ConstantPolicy(info.noop_action)
+
+
+class _NoisePolicy:
+    """Draws a raw perturbation each call and encodes it into the adversary's action."""
+
+    def __init__(self, info: AgentInfo, draw: Any) -> None:
+        self.info = info
+        self.draw = draw
+        self.rng = np.random.default_rng()
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reseed (when a seed is given)."""
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+
+    def act(self, observation: Any) -> np.ndarray:
+        """One encoded noise sample."""
+        return self.info.encode(self.draw(self.rng))
+
+
+def _vector(value: float | Sequence[float], size: int, name: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim > 1 or (arr.ndim == 1 and arr.size != size) or not np.isfinite(arr).all():
+        raise ConfigError(f"{name} must be a finite scalar or {size} values, got {value!r}.")
+    return np.broadcast_to(arr, (size,)).copy()
+
+
+@dataclass(frozen=True)
+class GaussianAdversary:
+    """Perturbation ``~ N(mean, std)`` per dimension, in the disruptor's raw units.
+
+    With an unbounded disruptor (``bounded=False``) this is the paper's random mode exactly;
+    with a bounded one the sample is clipped into the budget (and the clip counted).
+
+    Example:
+        >>> import advgame
+        >>> game = advgame.make("Hopper-v5", preset="state-gauss-0.1")
+        >>> pol = GaussianAdversary(std=0.1).build(game.agent_info("observation_adversary"))
+        >>> pol.reset(seed=0); pol.act(None).shape
+        (11,)
+    """
+
+    mean: float | Sequence[float] = 0.0
+    """Mean of the perturbation (raw units)."""
+    std: float | Sequence[float] = 0.1
+    """Standard deviation (raw units); the paper's σ = 0.1 or 0.15."""
+
+    def __post_init__(self) -> None:
+        if np.any(np.asarray(self.std, dtype=np.float64) < 0):
+            raise ConfigError(f"GaussianAdversary.std must be >= 0, got {self.std!r}.")
+
+    def build(self, info: AgentInfo) -> Policy:
+        """A seeded Gaussian sampler for `info`'s disruptor."""
+        n = int(np.prod(info.action_space.shape))
+        mean, std = _vector(self.mean, n, "mean"), _vector(self.std, n, "std")
+        return _NoisePolicy(info, lambda rng: rng.normal(mean, std))
+
+
+@dataclass(frozen=True)
+class UniformAdversary:
+    """Perturbation ``~ U(low, high)`` per dimension, in raw units (the paper's ``U[0.2, 0.8]``).
+
+    With a once-per-episode schedule this is the appendix's uniform initial draw of a shift.
+
+    Example:
+        >>> import advgame
+        >>> game = advgame.make("Ant-v5", preset="shift-uniform")
+        >>> pol = UniformAdversary(low=(9.81, 0.8), high=(19.82, 1.2)).build(
+        ...     game.agent_info("dynamics_adversary"))
+        >>> pol.reset(seed=0); pol.act(None).shape
+        (2,)
+    """
+
+    low: float | Sequence[float] = -0.1
+    """Lower end per dimension (raw units)."""
+    high: float | Sequence[float] = 0.1
+    """Upper end per dimension (raw units)."""
+
+    def __post_init__(self) -> None:
+        if np.any(np.asarray(self.low, dtype=np.float64) > np.asarray(self.high, dtype=np.float64)):
+            raise ConfigError(f"UniformAdversary needs low <= high, got {self.low!r} > {self.high!r}.")
+
+    def build(self, info: AgentInfo) -> Policy:
+        """A seeded uniform sampler for `info`'s disruptor."""
+        n = int(np.prod(info.action_space.shape))
+        low, high = _vector(self.low, n, "low"), _vector(self.high, n, "high")
+        return _NoisePolicy(info, lambda rng: rng.uniform(low, high))

@@ -1,0 +1,95 @@
+"""Scheduled adversaries: deterministic shifts, constant or sinusoidal per episode (paper appendix)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from advgame.errors import ConfigError
+from advgame.policy import AgentInfo, ConstantPolicy, Policy
+
+__all__ = ["ConstantAdversary", "SinusoidAdversary"]
+
+
+@dataclass(frozen=True)
+class ConstantAdversary:
+    """Always the same perturbation or parameter value, in raw units.
+
+    The appendix's deterministic shift of Ant is ``ConstantAdversary((14.715, 1.0))`` on a
+    (gravity, wind) dynamics disruptor.
+
+    Example:
+        >>> import advgame
+        >>> game = advgame.make("Ant-v5", preset="shift-deterministic")
+        >>> ConstantAdversary((14.715, 1.0)).build(game.agent_info("dynamics_adversary")).act(None)
+        array([ 0.  , -0.6], dtype=float32)
+    """
+
+    value: float | Sequence[float] = 0.0
+    """The raw value (broadcast over the adversary's dimensions)."""
+
+    def build(self, info: AgentInfo) -> Policy:
+        """A constant policy sending the encoded value."""
+        n = int(np.prod(info.action_space.shape))
+        return ConstantPolicy(info.encode(np.broadcast_to(np.asarray(self.value, float), (n,))))
+
+
+class _Sinusoid:
+    """Counts episodes (resets) and plays ``base + amplitude * sin(frequency * i + phase)``."""
+
+    def __init__(self, info: AgentInfo, base: np.ndarray, amp: np.ndarray, freq: np.ndarray,
+                 phase: np.ndarray) -> None:
+        self.info, self.base, self.amp, self.freq, self.phase = info, base, amp, freq, phase
+        self.episode = -1
+        self.action = info.encode(base)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Advance to the next episode index ``i``."""
+        self.episode += 1
+        value = self.base + self.amp * np.sin(self.freq * self.episode + self.phase)
+        self.action = self.info.encode(value)
+
+    def act(self, observation: Any) -> np.ndarray:
+        """This episode's value."""
+        return self.action
+
+
+@dataclass(frozen=True)
+class SinusoidAdversary:
+    """A shift that moves sinusoidally from episode to episode: ``base + A·sin(ω·i + φ)``.
+
+    ``i`` counts the episodes the policy has played (its resets, from 0). The appendix's Ant
+    and Humanoid schedule is ``SinusoidAdversary(base=(14.715, 1.0), amplitude=(4.905, 0.2),
+    frequency=0.5)`` on (gravity, wind).
+
+    Example:
+        >>> import advgame
+        >>> game = advgame.make("Ant-v5", preset="shift-sinusoid")
+        >>> pol = SinusoidAdversary((14.715, 1.0), (4.905, 0.2), 0.5).build(
+        ...     game.agent_info("dynamics_adversary"))
+        >>> pol.reset(); pol.act(None)
+        array([ 0. , -0.6], dtype=float32)
+    """
+
+    base: float | Sequence[float] = 0.0
+    """Centre value per dimension (raw units)."""
+    amplitude: float | Sequence[float] = 0.0
+    """Amplitude per dimension."""
+    frequency: float | Sequence[float] = 0.5
+    """Angular frequency per episode index."""
+    phase: float | Sequence[float] = 0.0
+    """Phase offset."""
+
+    def build(self, info: AgentInfo) -> Policy:
+        """A policy that advances one episode per reset."""
+        n = int(np.prod(info.action_space.shape))
+        vals = []
+        for name in ("base", "amplitude", "frequency", "phase"):
+            arr = np.asarray(getattr(self, name), dtype=np.float64)
+            if arr.ndim > 1 or (arr.ndim == 1 and arr.size != n) or not np.isfinite(arr).all():
+                raise ConfigError(f"SinusoidAdversary.{name} must be finite, scalar or {n} values.")
+            vals.append(np.broadcast_to(arr, (n,)).copy())
+        return _Sinusoid(info, *vals)

@@ -1,0 +1,77 @@
+"""advgame: robust reinforcement learning as adversarial PettingZoo games.
+
+Every Disrupted-MDP (Robust Gymnasium, sections 2-3) becomes a `pettingzoo.ParallelEnv` whose
+agents are the task's protagonists and one bounded adversary per disruptor::
+
+    import advgame
+    advgame.list_scenarios()
+    game = advgame.make("HalfCheetah-v5", preset="atla")
+    game.protagonists, game.adversaries
+
+Importing the package is cheap: simulators, torch and the registry load on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.1.0"
+
+# public name -> module that defines it (imported on first attribute access)
+_LAZY = {
+    "make": "advgame.registry",
+    "list_scenarios": "advgame.registry",
+    "scenario_spec": "advgame.registry",
+    "register": "advgame.registry",
+    "Preset": "advgame.registry",
+    "ScenarioSpec": "advgame.registry",
+    "Game": "advgame.game",
+    "Schedule": "advgame.schedule",
+    "ObservationDisruptor": "advgame.disruptors",
+    "ActionDisruptor": "advgame.disruptors",
+    "RewardDisruptor": "advgame.disruptors",
+    "DynamicsDisruptor": "advgame.disruptors",
+    "ForceDisruptor": "advgame.disruptors",
+    "Param": "advgame.disruptors",
+    "AgentInfo": "advgame.policy",
+    "Policy": "advgame.policy",
+    "PolicySpec": "advgame.policy",
+    "SingleAgentView": "advgame.views",
+    "view_factory": "advgame.views",
+    "rollout": "advgame.rollout",
+    "EpisodeResult": "advgame.rollout",
+    "AdvgameError": "advgame.errors",
+}
+
+__all__ = sorted(_LAZY)
+
+if TYPE_CHECKING:
+    from advgame.disruptors import (
+        ActionDisruptor,
+        DynamicsDisruptor,
+        ForceDisruptor,
+        ObservationDisruptor,
+        Param,
+        RewardDisruptor,
+    )
+    from advgame.errors import AdvgameError
+    from advgame.game import Game
+    from advgame.policy import AgentInfo, Policy, PolicySpec
+    from advgame.registry import Preset, ScenarioSpec, list_scenarios, make, register, scenario_spec
+    from advgame.rollout import EpisodeResult, rollout
+    from advgame.schedule import Schedule
+    from advgame.views import SingleAgentView, view_factory
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'advgame' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_LAZY])

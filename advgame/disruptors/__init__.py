@@ -1,0 +1,71 @@
+"""Disruptors: what an adversary may perturb, each one hook plus a budget.
+
+The registry maps a kind name (as used in dict configs and on the command line) to its spec
+class; a new disruptor is one file plus one line here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from advgame.disruptors.action import ActionDisruptor
+from advgame.disruptors.base import Disruptor, DisruptorSpec
+from advgame.disruptors.dynamics import DynamicsDisruptor, Param
+from advgame.disruptors.force import ForceDisruptor
+from advgame.disruptors.observation import ObservationDisruptor
+from advgame.disruptors.reward import RewardDisruptor
+from advgame.errors import ConfigError, UnknownNameError, did_you_mean
+from advgame.schedule import Schedule
+
+__all__ = [
+    "KINDS",
+    "ActionDisruptor",
+    "Disruptor",
+    "DisruptorSpec",
+    "DynamicsDisruptor",
+    "ForceDisruptor",
+    "ObservationDisruptor",
+    "Param",
+    "RewardDisruptor",
+    "from_config",
+]
+
+KINDS: dict[str, type[DisruptorSpec]] = {
+    "observation": ObservationDisruptor,
+    "action": ActionDisruptor,
+    "reward": RewardDisruptor,
+    "dynamics": DynamicsDisruptor,
+    "force": ForceDisruptor,
+}
+"""Disruptor kinds by name."""
+
+
+def from_config(kind: str, config: Mapping[str, Any] | DisruptorSpec) -> DisruptorSpec:
+    """Build a spec from a kind name and a plain dict (as found in JSON/CLI configs).
+
+    ``schedule`` may be a dict of `Schedule` fields; dynamics ``params`` may be dicts of
+    `Param` fields. ``kind="cost"`` is the reward disruptor with ``signal="cost"``.
+
+    Example:
+        >>> from_config("observation", {"eps": 0.1, "schedule": {"every": 100}}).schedule.every
+        100
+    """
+    if isinstance(config, DisruptorSpec):
+        return config
+    cfg = dict(config)
+    if kind == "cost":
+        kind, cfg = "reward", {**cfg, "signal": "cost"}
+    if kind not in KINDS:
+        raise UnknownNameError(
+            f"Unknown disruptor kind {kind!r}.{did_you_mean(kind, KINDS)} Known kinds: "
+            f"{sorted([*KINDS, 'cost'])}."
+        )
+    if isinstance(cfg.get("schedule"), Mapping):
+        cfg["schedule"] = Schedule(**cfg["schedule"])
+    if kind == "dynamics" and "params" in cfg:
+        cfg["params"] = tuple(p if isinstance(p, Param) else Param(**p) for p in cfg["params"])
+    try:
+        return KINDS[kind](**cfg)
+    except TypeError as exc:
+        raise ConfigError(f"Bad options for a {kind!r} disruptor: {exc}.") from None

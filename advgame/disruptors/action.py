@@ -1,0 +1,148 @@
+"""The action disruptor: additive, probabilistic and noisy action-robust forms, and discrete.
+
+* ``"additive"``: ``a~ = clip(a + ε·u)`` into the protagonist's action space.
+* ``"probabilistic"`` (Tessler et al. 2019, PR-MDP): with probability α the adversary's action
+  ``ā`` replaces the protagonist's. For a `Discrete` action space ``ā = argmax(u)``.
+* ``"noisy"`` (Tessler et al. 2019, NR-MDP): ``a~ = (1 - α)·a + α·ā``.
+
+For the probabilistic and noisy forms, ``u ∈ [-1, 1]^n`` maps linearly onto the action bounds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from gymnasium import spaces
+
+from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget, resolve_targets
+from advgame.errors import BudgetError, ConfigError
+
+if TYPE_CHECKING:
+    from advgame.task import TaskBase
+
+__all__ = ["ActionDisruptor", "ActionRuntime"]
+
+MODES = ("additive", "probabilistic", "noisy")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ActionDisruptor(DisruptorSpec):
+    """Perturb the action protagonists send to the simulator.
+
+    Example:
+        >>> import advgame
+        >>> game = advgame.make("Hopper-v5", disruptors=[ActionDisruptor(eps=0.1)])
+        >>> game.action_space("action_adversary").shape
+        (3,)
+    """
+
+    kind = "action"
+    mode: Literal["additive", "probabilistic", "noisy"] = "additive"
+    """Which action-robust form (see the module docstring)."""
+    eps: float | Sequence[float] = 0.1
+    """Additive budget per action dimension (``mode="additive"``)."""
+    alpha: float = 0.1
+    """Probability of replacement, or mixing weight (``"probabilistic"``, ``"noisy"``)."""
+    targets: Sequence[str] | None = None
+    """Protagonists whose actions are perturbed (``None``: all)."""
+    bounded: bool = True
+    """``False``: additive, unbounded (the paper's random mode); the action is the raw offset."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.mode not in MODES:
+            raise ConfigError(f"mode must be one of {MODES}, got {self.mode!r}.")
+        if not (0.0 <= float(self.alpha) <= 1.0):
+            raise BudgetError(f"ActionDisruptor.alpha must be in [0, 1], got {self.alpha!r}.")
+        if self.mode == "additive" and self.bounded:
+            eps = np.asarray(self.eps, dtype=np.float64)
+            as_budget(self.eps, eps.size if eps.ndim else 1, "ActionDisruptor.eps")
+        if self.mode != "additive" and not self.bounded:
+            raise ConfigError("bounded=False applies only to mode='additive'.")
+
+    def build(self, task: TaskBase) -> ActionRuntime:
+        """Bind to `task`, checking that each target's action space fits the mode."""
+        targets = resolve_targets(task, self.targets)
+        for t in targets:
+            space = task.action_spaces[t]
+            if isinstance(space, spaces.Discrete) and self.mode != "probabilistic":
+                raise ConfigError(
+                    f"{t!r} has a Discrete action space; use ActionDisruptor(mode='probabilistic') "
+                    f"(the adversary's choice replaces the action with probability alpha), not {self.mode!r}."
+                )
+            if not isinstance(space, (spaces.Box, spaces.Discrete)):
+                raise ConfigError(f"{t!r} has action space {space}; only Box and Discrete are supported.")
+        return ActionRuntime(self, task, targets)
+
+
+class ActionRuntime(AdditiveDisruptor):
+    """`ActionDisruptor` bound to a task."""
+
+    hook = "action"
+
+    def __init__(self, spec: ActionDisruptor, task: TaskBase, targets: tuple[str, ...]) -> None:
+        self.targets = targets
+        self.mode = spec.mode
+        self.alpha = float(spec.alpha)
+        self.spaces = {t: task.action_spaces[t] for t in targets}
+        self.sizes = {t: _size(s) for t, s in self.spaces.items()}
+        units = []
+        for t in targets:
+            s = self.spaces[t]
+            if spec.mode == "additive":
+                eps = as_budget(spec.eps, self.sizes[t], "ActionDisruptor.eps") if spec.bounded else np.ones(self.sizes[t])
+                units.append(eps)
+            elif isinstance(s, spaces.Box):
+                units.append((s.high - s.low).reshape(-1) / 2.0)
+            else:
+                units.append(np.ones(self.sizes[t]))
+        super().__init__(spec, np.concatenate(units), bounded=spec.bounded,
+                         blocks=[self.sizes[t] for t in targets])
+
+    def encode(self, value: Any) -> np.ndarray:
+        """Raw units -> adversary action: an offset (additive) or the adversary's own action."""
+        if self.mode == "additive":
+            return super().encode(value)
+        out, i = [], 0
+        flat = np.asarray(value, dtype=np.float64).reshape(-1)
+        for t in self.targets:
+            space, n = self.spaces[t], self.sizes[t]
+            if isinstance(space, spaces.Discrete):
+                onehot = -np.ones(n)
+                onehot[int(flat[i]) - int(space.start)] = 1.0
+                out.append(onehot)
+                i += 1
+            else:
+                v = flat[i : i + n]
+                out.append(2.0 * (v - space.low) / (space.high - space.low) - 1.0)
+                i += n
+        return np.concatenate(out).astype(np.float32)
+
+    def action(self, actions: dict[str, Any], u: np.ndarray, rng: np.random.Generator) -> None:
+        """Replace each target's action by its disrupted version."""
+        i = 0
+        for t in self.targets:
+            n, space = self.sizes[t], self.spaces[t]
+            block = u[i : i + n]
+            i += n
+            if isinstance(space, spaces.Discrete):
+                if rng.random() < self.alpha:
+                    actions[t] = np.int64(space.start + int(np.argmax(block)))
+                continue
+            a = np.asarray(actions[t], dtype=np.float64)
+            if self.mode == "additive":
+                new = a + block * self.unit[i - n : i]
+            else:
+                adv = space.low + (block + 1.0) * 0.5 * (space.high - space.low)
+                if self.mode == "noisy":
+                    new = (1.0 - self.alpha) * a + self.alpha * adv
+                else:
+                    new = adv if rng.random() < self.alpha else a
+            actions[t] = np.clip(new, space.low, space.high).astype(space.dtype)
+
+
+def _size(space: spaces.Space) -> int:
+    return int(space.n) if isinstance(space, spaces.Discrete) else int(np.prod(space.shape))

@@ -1,0 +1,280 @@
+"""The dynamics disruptor (internal shift): masses, gravity, wind, friction, damping, gear, lengths.
+
+Each `Param` is one adversary action dimension, mapped linearly from ``[-1, 1]`` onto its
+interval ``[low, high]`` (absolute units, or factors of the nominal value if ``relative``).
+Nominal values are snapshotted when the game is built and written back on every reset (MuJoCo
+keeps model edits across ``env.reset()``) unless the schedule says the shift persists.
+Body lengths change the capsule's half-length in an `mujoco.MjSpec` and recompile the model,
+so mass, inertia and contacts all follow; editing collision geometry alone would change nothing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from advgame.disruptors.base import DisruptorSpec, Disruptor
+from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
+
+if TYPE_CHECKING:
+    from advgame.task import MujocoSim, TaskBase
+
+__all__ = ["DynamicsDisruptor", "DynamicsRuntime", "Param"]
+
+KINDS = ("mass", "gravity", "wind", "friction", "damping", "gear", "length")
+# Which model object each kind names in `Param.names` (None: a global option, no names).
+NAMED = {"mass": "body", "length": "body", "friction": "geom", "damping": "joint",
+         "gear": "actuator", "gravity": None, "wind": None}
+
+
+@dataclass(frozen=True)
+class Param:
+    """One dynamics parameter under the adversary's control, and its interval.
+
+    Example:
+        >>> Param("gravity", 9.81, 19.62).kind
+        'gravity'
+    """
+
+    kind: Literal["mass", "gravity", "wind", "friction", "damping", "gear", "length"]
+    """What is changed: body ``mass`` (inertia scaled with it), ``gravity`` magnitude, ``wind``
+    speed along x (with `air_density`), sliding ``friction``, joint ``damping``, actuator
+    ``gear``, or the full ``length`` of a body's capsule."""
+    low: float
+    """Lower end of the interval (absolute, or a factor of nominal if `relative`)."""
+    high: float
+    """Upper end of the interval."""
+    names: Sequence[str] = ()
+    """Bodies (mass, length), geoms (friction), joints (damping) or actuators (gear) it applies
+    to; empty means all of them. Must be empty for gravity and wind."""
+    relative: bool = False
+    """Interpret `low`/`high` as factors of each target's nominal value."""
+    air_density: float = 1.2
+    """``wind`` only: the medium density (kg/m³) set while the wind blows; MuJoCo's default is 0,
+    a vacuum in which wind has no effect."""
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise UnknownNameError(
+                f"Unknown dynamics parameter {self.kind!r}.{did_you_mean(self.kind, KINDS)} "
+                f"Known: {KINDS}."
+            )
+        lo, hi = float(self.low), float(self.high)
+        if not (np.isfinite(lo) and np.isfinite(hi)) or lo > hi:
+            raise BudgetError(
+                f"Param({self.kind!r}) needs finite low <= high, got low={self.low!r}, high={self.high!r}."
+            )
+        if self.kind in ("mass", "friction", "damping", "length", "gravity") and lo < 0:
+            raise BudgetError(f"Param({self.kind!r}) cannot be negative, got low={self.low!r}.")
+        if self.kind in ("mass", "length") and lo == 0 and not self.relative:
+            raise BudgetError(f"Param({self.kind!r}) must be > 0, got low={self.low!r}.")
+        if isinstance(self.names, str):
+            raise ConfigError(f"Param.names must be a sequence of names, got the string {self.names!r}.")
+        if NAMED[self.kind] is None and tuple(self.names):
+            raise ConfigError(f"Param({self.kind!r}) is global and takes no names, got {self.names!r}.")
+
+
+@dataclass(frozen=True, kw_only=True)
+class DynamicsDisruptor(DisruptorSpec):
+    """Shift internal model parameters within intervals (the paper's internal dynamic shift).
+
+    Parameters set on an active step stay in force until the next active step or the end of
+    the episode.
+
+    Example:
+        >>> import advgame
+        >>> spec = DynamicsDisruptor(params=[Param("gravity", 9.81, 19.62)])
+        >>> advgame.make("Ant-v5", disruptors=[spec]).action_space("dynamics_adversary").shape
+        (1,)
+    """
+
+    kind = "dynamics"
+    params: Sequence[Param] = field(default_factory=tuple)
+    """The parameters, one adversary action dimension each."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.params or not all(isinstance(p, Param) for p in self.params):
+            raise ConfigError("DynamicsDisruptor.params must be a non-empty sequence of Param.")
+        if self.schedule.persist and any(p.kind == "length" for p in self.params):
+            raise ConfigError("A persistent (persist=True) length shift is not supported.")
+
+    def build(self, task: TaskBase) -> DynamicsRuntime:
+        """Bind to `task`'s MuJoCo model, resolving names and snapshotting nominal values."""
+        return DynamicsRuntime(self, task.sim)
+
+
+class _Bound:
+    """A Param resolved against one model: ids and nominal values."""
+
+    def __init__(self, p: Param, sim: MujocoSim) -> None:
+        self.p = p
+        model = sim.model
+        kind = NAMED[p.kind]
+        if kind and not p.names and p.kind == "length":
+            raise ConfigError("Param('length') needs the bodies to lengthen in names=(...).")
+        if kind and not p.names:  # every object of that kind (bodies: all but the world)
+            count = {"body": model.nbody, "geom": model.ngeom, "joint": model.njnt,
+                     "actuator": model.nu}[kind]
+            self.ids = np.arange(1 if kind == "body" else 0, count, dtype=np.int64)
+        elif kind:
+            ids = {"body": sim.body_id, "geom": sim.geom_id, "joint": sim.joint_id,
+                   "actuator": sim.actuator_id}[kind]
+            self.ids = np.array([ids(n) for n in p.names], dtype=np.int64)
+        else:
+            self.ids = np.zeros(0, dtype=np.int64)
+        if p.kind == "damping":
+            self.ids = np.array([model.jnt_dofadr[j] for j in self.ids], dtype=np.int64)
+        if p.kind == "length":
+            self.geoms = [_capsule_of(sim, n) for n in p.names]
+        self.nominal = self._read(sim)
+
+    def _read(self, sim: MujocoSim) -> dict[str, np.ndarray]:
+        m, k = sim.model, self.p.kind
+        if k == "mass":
+            return {"mass": m.body_mass[self.ids].copy(), "inertia": m.body_inertia[self.ids].copy()}
+        if k == "gravity":
+            return {"gravity": m.opt.gravity.copy()}
+        if k == "wind":
+            return {"wind": m.opt.wind.copy(), "density": np.array([m.opt.density])}
+        if k == "friction":
+            return {"friction": m.geom_friction[self.ids, 0].copy()}
+        if k == "damping":
+            return {"damping": m.dof_damping[self.ids].copy()}
+        if k == "gear":
+            return {"gear": m.actuator_gear[self.ids, 0].copy()}
+        return {"half": np.array([g.size[1] for g in self.geoms])}
+
+    def reference(self) -> np.ndarray:
+        """The nominal value(s) in the parameter's own units (absolute)."""
+        k = self.p.kind
+        if k == "gravity":
+            return np.array([-self.nominal["gravity"][2]])
+        if k == "wind":
+            return np.array([self.nominal["wind"][0]])
+        if k == "length":
+            return 2.0 * self.nominal["half"]
+        return next(iter(self.nominal.values()))
+
+    def apply(self, sim: MujocoSim, value: float) -> None:
+        """Write `value` into the live model (lengths are handled by the runtime)."""
+        m, k, nom = sim.model, self.p.kind, self.nominal
+        nom_values = self.reference()
+        target = nom_values * value if self.p.relative else np.full_like(nom_values, value)
+        if k == "mass":
+            m.body_mass[self.ids] = target
+            ratio = np.where(nom["mass"] > 0, target / np.where(nom["mass"] > 0, nom["mass"], 1), 1)
+            m.body_inertia[self.ids] = nom["inertia"] * ratio[:, None]
+        elif k == "gravity":
+            m.opt.gravity[2] = -float(target[0])
+        elif k == "wind":
+            m.opt.wind[0] = float(target[0])
+            m.opt.density = float(self.p.air_density)
+        elif k == "friction":
+            m.geom_friction[self.ids, 0] = target
+        elif k == "damping":
+            m.dof_damping[self.ids] = target
+        elif k == "gear":
+            m.actuator_gear[self.ids, 0] = target
+        else:
+            for g, full in zip(self.geoms, target, strict=True):
+                size = np.array(g.size)
+                size[1] = full / 2.0
+                g.size = size
+
+    def restore(self, sim: MujocoSim) -> None:
+        """Write the nominal values back into the live model."""
+        m, k, nom = sim.model, self.p.kind, self.nominal
+        if k == "mass":
+            m.body_mass[self.ids] = nom["mass"]
+            m.body_inertia[self.ids] = nom["inertia"]
+        elif k == "gravity":
+            m.opt.gravity[:] = nom["gravity"]
+        elif k == "wind":
+            m.opt.wind[:] = nom["wind"]
+            m.opt.density = float(nom["density"][0])
+        elif k == "friction":
+            m.geom_friction[self.ids, 0] = nom["friction"]
+        elif k == "damping":
+            m.dof_damping[self.ids] = nom["damping"]
+        elif k == "gear":
+            m.actuator_gear[self.ids, 0] = nom["gear"]
+        else:
+            for g, half in zip(self.geoms, nom["half"], strict=True):
+                size = np.array(g.size)
+                size[1] = half
+                g.size = size
+
+
+def _capsule_of(sim: MujocoSim, body: str) -> Any:
+    """The spec geom of `body` whose length the disruptor changes: its first capsule/cylinder."""
+    import mujoco
+
+    sim.body_id(body)  # clear error for an unknown body
+    kinds = (mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_CYLINDER)
+    for g in sim.spec.body(body).geoms:
+        if g.type in kinds:
+            return g
+    raise ConfigError(f"Body {body!r} has no capsule or cylinder geom whose length could change.")
+
+
+class DynamicsRuntime(Disruptor):
+    """`DynamicsDisruptor` bound to a MuJoCo model."""
+
+    hook = "environment"
+
+    def __init__(self, spec: DynamicsDisruptor, sim: MujocoSim) -> None:
+        self.params = [_Bound(p, sim) for p in spec.params]
+        self.low = np.array([p.low for p in spec.params], dtype=np.float64)
+        self.high = np.array([p.high for p in spec.params], dtype=np.float64)
+        self.current: np.ndarray | None = None
+        self._epoch = sim.epoch
+        super().__init__(spec, len(self.params), bounded=True)
+
+    def values(self, u: np.ndarray) -> np.ndarray:
+        """Parameter values for a (decoded) action."""
+        return self.low + (u + 1.0) * 0.5 * (self.high - self.low)
+
+    def encode(self, value: Any) -> np.ndarray:
+        """Parameter values (absolute, or factors if relative) -> adversary action."""
+        v = np.asarray(value, dtype=np.float64).reshape(self.shape)
+        span = self.high - self.low
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.where(span > 0, 2.0 * (v - self.low) / np.where(span > 0, span, 1.0) - 1.0, 0.0)
+        return u.astype(np.float32)
+
+    @property
+    def noop_action(self) -> np.ndarray:
+        """The action nearest the nominal model (exactly nominal when it lies in the interval)."""
+        nominal = [1.0 if b.p.relative else float(b.reference()[0]) for b in self.params]
+        return np.clip(self.encode(nominal), -1.0, 1.0)
+
+    def environment(self, sim: MujocoSim, u: np.ndarray | None) -> None:
+        """Set the parameters on an active step; re-apply them if the model was recompiled."""
+        if u is not None:
+            self.current = self.values(u)
+            self._write(sim)
+        elif self.current is not None and sim.epoch != self._epoch:
+            self._write(sim)
+
+    def _write(self, sim: MujocoSim) -> None:
+        assert self.current is not None
+        lengths = [(b, v) for b, v in zip(self.params, self.current, strict=True) if b.p.kind == "length"]
+        if lengths:
+            for b, v in lengths:
+                b.apply(sim, float(v))
+            sim.recompile()
+        for b, v in zip(self.params, self.current, strict=True):
+            if b.p.kind != "length":
+                b.apply(sim, float(v))
+        self._epoch = sim.epoch
+
+    def restore(self, sim: MujocoSim) -> None:
+        """Write every nominal value back and forget the current shift."""
+        for b in self.params:
+            b.restore(sim)
+        self.current = None
+        self._epoch = sim.epoch

@@ -1,0 +1,49 @@
+"""The advgame error hierarchy: one root, every message says what was wrong and how to fix it."""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+
+__all__ = [
+    "ActionError",
+    "AdvgameError",
+    "BudgetError",
+    "ConfigError",
+    "UnknownNameError",
+    "UnknownScenarioError",
+    "did_you_mean",
+]
+
+
+class AdvgameError(Exception):
+    """Root of every error advgame raises on purpose; catch this to catch them all."""
+
+
+class ConfigError(AdvgameError, ValueError):
+    """A configuration value (disruptor, schedule, preset, learner) is invalid."""
+
+
+class BudgetError(ConfigError):
+    """A budget is negative, non-finite or of the wrong shape."""
+
+
+class UnknownNameError(ConfigError, KeyError):
+    """A name (disruptor kind, body, parameter, agent, preset) does not exist."""
+
+    def __str__(self) -> str:  # KeyError would repr() the message
+        return str(self.args[0]) if self.args else ""
+
+
+class UnknownScenarioError(UnknownNameError):
+    """`make` was given a scenario id that is not registered."""
+
+
+class ActionError(AdvgameError, ValueError):
+    """An action dict passed to `Game.step` is missing agents, names unknown ones, or is malformed."""
+
+
+def did_you_mean(name: str, choices: Iterable[str]) -> str:
+    """Return ' Did you mean "x"?' for the closest choice, or '' if none is close."""
+    close = difflib.get_close_matches(str(name), list(choices), n=1, cutoff=0.5)
+    return f' Did you mean "{close[0]}"?' if close else ""

@@ -1,0 +1,333 @@
+"""The game: a Disrupted-MDP as a PettingZoo `ParallelEnv`.
+
+Agents are the task's protagonists plus one adversary per disruptor. One protagonist step
+``t`` of the Disrupted-MDP is one or two *moves* (calls to `Game.step`):
+
+1. **sense move** (only when an observation disruptor with ``timing="sense"`` acts at ``t``):
+   the observation adversaries, which observe the true state ``s_t``, choose ``δ_t``; the
+   protagonists receive ``s_t + δ_t``. Nobody else's action counts and every reward is 0.
+2. **act move**: environment (dynamics/force) adversaries set the simulator, protagonists act
+   on what they were shown, action adversaries perturb those actions, the simulator steps,
+   reward/cost adversaries perturb what the learners observe. Protagonists receive the
+   *observed* reward; every adversary receives ``-payoff``, the negative of the protagonists'
+   *true* team payoff (``true_reward - cost_weight * true_cost``).
+
+Every agent submits an action on every move (the ParallelEnv contract); `Game.next_movers` says
+whose action the next move uses, and ``infos[agent]["acted"]`` says whose action counted in the
+move just made. Observations returned by an act move that is followed by a sense move are the
+true next state; the protagonists act on the perturbed one the sense move returns.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from advgame.disruptors.base import Disruptor, DisruptorSpec
+from advgame.errors import ActionError, ConfigError, did_you_mean
+from advgame.policy import AgentInfo
+from advgame.schedule import PHASES
+from advgame.task import TaskBase
+
+__all__ = ["Game"]
+
+log = logging.getLogger(__name__)
+
+SENSE, ACT = "sense", "act"
+
+
+class Game(ParallelEnv):
+    """A PettingZoo ParallelEnv of protagonists against bounded adversary agents.
+
+    Build one with `advgame.make`. Args:
+        task: the task base.
+        disruptors: disruptor specs; each becomes one adversary agent.
+        cost_weight: weight of the true cost in the payoff adversaries are paid on.
+        phase: ``"train"`` or ``"eval"``; disruptors whose schedule is for the other phase are
+            the identity (the paper's in-training / post-training settings).
+        scenario_id: the registry id, for `repr` and reports.
+    """
+
+    metadata = {"name": "advgame_v0", "is_parallelizable": True, "render_modes": ["rgb_array", "human"]}
+
+    def __init__(self, task: TaskBase, disruptors: Sequence[DisruptorSpec] = (), *,
+                 cost_weight: float = 0.0, phase: str = "train", scenario_id: str = "") -> None:
+        self.task = task
+        self.scenario_id = scenario_id
+        self.preset: Any = None
+        """The `Preset` the game was made from, if any (set by `advgame.make`)."""
+        if not np.isfinite(cost_weight) or cost_weight < 0:
+            raise ConfigError(f"cost_weight must be finite and >= 0, got {cost_weight!r}.")
+        self.cost_weight = float(cost_weight)
+        self.protagonists: tuple[str, ...] = tuple(task.protagonists)
+        self.disruptors: dict[str, Disruptor] = {}
+        for spec in disruptors:
+            if not isinstance(spec, DisruptorSpec):
+                raise ConfigError(f"Expected a DisruptorSpec, got {type(spec).__name__}: {spec!r}.")
+            if spec.agent in self.disruptors or spec.agent in self.protagonists:
+                raise ConfigError(
+                    f"Two agents are named {spec.agent!r}; give one disruptor a distinct name=..."
+                )
+            self.disruptors[spec.agent] = spec.build(task)
+        self.adversaries: tuple[str, ...] = tuple(self.disruptors)
+        self.possible_agents = [*self.protagonists, *self.adversaries]
+        self.agents: list[str] = []
+        self._all = frozenset(self.possible_agents)
+        self._obs_spaces = {**task.observation_spaces, **dict.fromkeys(self.adversaries, task.state_space)}
+        self._act_spaces = {**task.action_spaces, **{a: d.action_space for a, d in self.disruptors.items()}}
+        by_hook: dict[str, list[Disruptor]] = {"observation": [], "action": [], "reward": [], "environment": []}
+        for d in self.disruptors.values():
+            by_hook[d.hook].append(d)
+        self._sensing = [d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "sense"]
+        self._stale = [d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "stale"]
+        self._action_ds, self._reward_ds = by_hook["action"], by_hook["reward"]
+        self._env_ds = by_hook["environment"]
+        self._act_ds = [*self._env_ds, *self._action_ds, *self._reward_ds, *self._stale]
+        self._phase = ""
+        self.phase = phase
+        self._rng = np.random.default_rng()
+        self._last: dict[str, np.ndarray] = {}
+        self._active: dict[str, bool] = {}
+        self.move = ACT
+        self.t = 0
+        self.next_movers: frozenset[str] = frozenset()
+        self._true_obs: dict[str, Any] = {}
+        self._shown: dict[str, Any] = {}
+        self._state: Any = None
+
+    def agent_info(self, agent: str) -> AgentInfo:
+        """Spaces (and disruptor) of `agent`, what a `PolicySpec` needs to build its policy."""
+        return AgentInfo(agent, self.observation_space(agent), self.action_space(agent),
+                         self.disruptors.get(agent))
+
+    # -- PettingZoo surface -----------------------------------------------------------------
+    def observation_space(self, agent: str) -> spaces.Space:
+        """Protagonists: the task's observation space; adversaries: the true-state space."""
+        return self._obs_spaces[self._known(agent)]
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """Protagonists: the task's action space; adversaries: their disruptor's bounded Box."""
+        return self._act_spaces[self._known(agent)]
+
+    @property
+    def state_space(self) -> spaces.Space:  # type: ignore[override]
+        """The space of `state()`, the true global state."""
+        return self.task.state_space
+
+    def state(self) -> Any:
+        """The true global state ``s_t`` (what adversaries observe)."""
+        return self._state
+
+    @property
+    def phase(self) -> str:
+        """``"train"`` or ``"eval"``: which schedules are live."""
+        return self._phase
+
+    @phase.setter
+    def phase(self, value: str) -> None:
+        if value not in PHASES[:2]:
+            raise ConfigError(f"phase must be 'train' or 'eval', got {value!r}.")
+        self._phase = value
+
+    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        """Start an episode: restore nominal parameters, reset the task, draw the first schedule.
+
+        ``options={"phase": "eval"}`` switches the phase; other keys are ignored.
+        """
+        if seed is not None:
+            self._rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xAD6A]))
+        if options and "phase" in options:
+            self.phase = options["phase"]
+        self._restore_environment()
+        for d in self.disruptors.values():
+            d.reset()
+        obs, info = self.task.reset(seed)
+        self.t = 0
+        self.agents = list(self.possible_agents)
+        self._last = {}
+        observations = self._begin_step(obs, pending=None)
+        infos: dict[str, dict] = {a: {} for a in self.agents}
+        for p in self.protagonists:
+            infos[p] = dict(info)
+        return observations, infos
+
+    def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """Make one move; see the module docstring for sense and act moves."""
+        if not self.agents:
+            raise ActionError("The episode is over (no live agents); call reset() before step().")
+        if actions.keys() != self._all:
+            self._bad_keys(actions)
+        if self.move == SENSE:
+            return self._sense(actions)
+        return self._act(actions)
+
+    def render(self) -> Any:
+        """Render the task base."""
+        return self.task.render()
+
+    def close(self) -> None:
+        """Close the task base."""
+        self.task.close()
+
+    # -- moves ------------------------------------------------------------------------------
+    def _sense(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        shown = dict(self._shown)
+        acted = {}
+        for d in self._sensing:
+            if self._active[d.agent]:
+                u, n = d.decode(actions[d.agent])
+                self._last[d.agent] = u
+                d.observation(shown, u)
+                acted[d.agent] = n
+        self._shown = shown
+        self.move = ACT
+        self.next_movers = self._act_movers()
+        obs = {**shown, **dict.fromkeys(self.adversaries, self._state)}
+        zeros = dict.fromkeys(self.possible_agents, 0.0)
+        false = dict.fromkeys(self.possible_agents, False)
+        infos = {a: {"acted": a in acted, "clipped": acted.get(a, 0)} for a in self.possible_agents}
+        return obs, zeros, false, dict(false), infos
+
+    def _act(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        used: dict[str, np.ndarray] = {}
+        clipped: dict[str, int] = {}
+        for d in self._act_ds:
+            if self._active[d.agent]:
+                used[d.agent], clipped[d.agent] = d.decode(actions[d.agent])
+                self._last[d.agent] = used[d.agent]
+        sim_epoch = self.task.sim.epoch if self._env_ds else 0
+        for d in self._env_ds:
+            d.environment(self.task.sim, used.get(d.agent))
+        if self._env_ds and self.task.sim.epoch != sim_epoch:  # a recompile dropped earlier edits
+            for d in self._env_ds:
+                d.environment(self.task.sim, None)
+        acts = {p: self._protagonist_action(p, actions[p]) for p in self.protagonists}
+        for d in self._action_ds:
+            u = self._effective(d, used)
+            if u is not None:
+                d.action(acts, u, self._rng)
+        obs, reward, cost, terminated, truncated, info = self.task.step(acts)
+        payoff = reward - self.cost_weight * cost
+        rewards = dict.fromkeys(self.protagonists, reward)
+        costs = dict.fromkeys(self.protagonists, cost)
+        for d in self._reward_ds:
+            u = self._effective(d, used)
+            if u is not None:
+                d.reward(rewards, costs, u)
+        self.t += 1
+        done = terminated or truncated
+        observations = self._begin_step(obs, pending=used) if not done else self._final_obs(obs)
+        rewards.update(dict.fromkeys(self.adversaries, -payoff))
+        infos: dict[str, dict] = {}
+        for p in self.protagonists:
+            infos[p] = {**info, "acted": True, "true_reward": reward, "true_cost": cost,
+                        "cost": costs[p], "payoff": payoff}
+        for a in self.adversaries:
+            infos[a] = {"acted": a in used, "clipped": clipped.get(a, 0)}
+        terms = dict.fromkeys(self.possible_agents, terminated)
+        truncs = dict.fromkeys(self.possible_agents, truncated)
+        if done:
+            self.agents = []
+            self.next_movers = frozenset()
+        return observations, rewards, terms, truncs, infos
+
+    # -- helpers ----------------------------------------------------------------------------
+    def _begin_step(self, obs: dict[str, Any], pending: dict[str, np.ndarray] | None) -> dict:
+        """Record the true state of step t, draw its schedule, and build what agents see."""
+        self._true_obs = obs
+        self._state = self.task.state(obs)
+        t, phase, rng = self.t, self._phase, self._rng
+        self._active = {a: d.schedule.is_active(t, phase, rng) for a, d in self.disruptors.items()}
+        shown = dict(obs)
+        for d in self._stale:  # δ chosen in the act move that produced this observation
+            u = (pending or {}).get(d.agent)
+            if u is None and d.schedule.hold:
+                u = self._last.get(d.agent)
+            if u is not None:
+                d.observation(shown, u)
+        sense = False
+        for d in self._sensing:
+            if self._active[d.agent]:
+                sense = True
+            elif d.schedule.hold and d.agent in self._last:
+                d.observation(shown, self._last[d.agent])
+        self._shown = shown
+        self.move = SENSE if sense else ACT
+        if sense:
+            self.next_movers = frozenset(d.agent for d in self._sensing if self._active[d.agent])
+        else:
+            self.next_movers = self._act_movers()
+        return {**shown, **dict.fromkeys(self.adversaries, self._state)}
+
+    def _final_obs(self, obs: dict[str, Any]) -> dict:
+        self._true_obs = obs
+        self._state = self.task.state(obs)
+        return {**obs, **dict.fromkeys(self.adversaries, self._state)}
+
+    def _act_movers(self) -> frozenset[str]:
+        return frozenset([*self.protagonists, *(d.agent for d in self._act_ds if self._active[d.agent])])
+
+    def _effective(self, d: Disruptor, used: dict[str, np.ndarray]) -> np.ndarray | None:
+        u = used.get(d.agent)
+        if u is None and d.schedule.hold:
+            u = self._last.get(d.agent)
+        return u
+
+    def _protagonist_action(self, agent: str, action: Any) -> Any:
+        space = self._act_spaces[agent]
+        if isinstance(space, spaces.Discrete):
+            ok = np.ndim(action) == 0 and float(action) == int(action) and space.contains(np.int64(action))
+            if not ok:
+                raise ActionError(f"Action for {agent!r} must be an int in {space}, got {action!r}.")
+            return np.int64(action)
+        a = np.asarray(action, dtype=space.dtype)
+        if a.shape != space.shape:
+            raise ActionError(f"Action for {agent!r} has shape {a.shape}; expected {space.shape} ({space}).")
+        if not np.isfinite(a).all():
+            raise ActionError(f"Action for {agent!r} contains NaN or inf: {a}.")
+        return a
+
+    def _restore_environment(self) -> None:
+        if not self._env_ds:
+            return
+        sim = self.task.sim
+        if not any(d.schedule.persist for d in self._env_ds):
+            sim.restore_model()
+        for d in self._env_ds:
+            if not d.schedule.persist:
+                d.restore(sim)
+
+    def _known(self, agent: str) -> str:
+        if agent not in self._obs_spaces:
+            raise ActionError(
+                f"Unknown agent {agent!r}.{did_you_mean(agent, self.possible_agents)} "
+                f"Agents of this game: {self.possible_agents}."
+            )
+        return agent
+
+    def _bad_keys(self, actions: Mapping[str, Any]) -> None:
+        missing = sorted(self._all - actions.keys())
+        unknown = sorted(set(actions) - self._all)
+        msg = []
+        if missing:
+            msg.append(f"missing actions for {missing}")
+        if unknown:
+            hint = "".join(did_you_mean(u, self.possible_agents) for u in unknown)
+            msg.append(f"actions for unknown agents {unknown}.{hint}")
+        raise ActionError(
+            f"step() needs one action for every live agent {self.agents}: {'; '.join(msg)}. "
+            "Agents whose action does not count this move (see game.next_movers) may send "
+            "any valid action, e.g. action_space(agent).sample()."
+        )
+
+    def __str__(self) -> str:
+        return repr(self)
+
+    def __repr__(self) -> str:
+        return (f"Game({self.scenario_id or type(self.task).__name__!r}, protagonists="
+                f"{list(self.protagonists)}, adversaries={list(self.adversaries)}, phase={self.phase!r})")

@@ -1,0 +1,112 @@
+"""The one interface every policy shares: protagonists, noise, schedules, networks, LLMs.
+
+A `Policy` is stateful within an episode: `reset` starts an episode (with a seed), `act` maps
+one observation to one action. A `PolicySpec` is a small picklable config that *builds* a
+policy for one agent of one game, given that agent's `AgentInfo` (its spaces and, for an
+adversary, its disruptor, whose `encode` turns raw perturbations into actions). Specs are what
+presets, populations and worker processes pass around.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+import numpy as np
+from gymnasium import spaces
+
+from advgame.errors import ConfigError
+
+if TYPE_CHECKING:
+    from advgame.disruptors.base import Disruptor
+
+__all__ = ["AgentInfo", "CallablePolicy", "ConstantPolicy", "Policy", "PolicySpec", "as_policy"]
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """Chooses actions for one agent."""
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start a new episode; `seed` reseeds any randomness."""
+
+    def act(self, observation: Any) -> Any:
+        """The action for `observation`."""
+
+
+@runtime_checkable
+class PolicySpec(Protocol):
+    """A picklable recipe that builds a `Policy` for one agent."""
+
+    def build(self, info: AgentInfo) -> Policy:
+        """Build the policy for the agent described by `info`."""
+
+
+@dataclass(frozen=True)
+class AgentInfo:
+    """What a policy needs to know about the agent it plays."""
+
+    agent: str
+    """The agent id."""
+    observation_space: spaces.Space
+    """What the agent observes."""
+    action_space: spaces.Space
+    """What the agent sends."""
+    disruptor: Disruptor | None = None
+    """The disruptor an adversary controls (``None`` for protagonists)."""
+
+    def encode(self, value: Any) -> np.ndarray:
+        """Raw perturbation (state offset, force, parameter value) -> this adversary's action."""
+        if self.disruptor is None:
+            raise ConfigError(f"{self.agent!r} is a protagonist; it has no disruptor to encode for.")
+        return self.disruptor.encode(value)
+
+    @property
+    def noop_action(self) -> Any:
+        """The identity action of an adversary (its disruptor leaves the task unchanged)."""
+        if self.disruptor is None:
+            raise ConfigError(f"{self.agent!r} is a protagonist; it has no no-op action.")
+        return self.disruptor.noop_action
+
+
+class ConstantPolicy:
+    """Always the same action (e.g. an adversary's no-op)."""
+
+    def __init__(self, action: Any) -> None:
+        self.action = action
+
+    def reset(self, seed: int | None = None) -> None:
+        """Nothing to reset."""
+
+    def act(self, observation: Any) -> Any:
+        """The constant action."""
+        return self.action
+
+
+class CallablePolicy:
+    """A plain function ``observation -> action`` as a policy (e.g. a fixed, trained controller)."""
+
+    def __init__(self, fn: Callable[[Any], Any]) -> None:
+        self.fn = fn
+
+    def reset(self, seed: int | None = None) -> None:
+        """Plain functions keep no episode state."""
+
+    def act(self, observation: Any) -> Any:
+        """Call the function."""
+        return self.fn(observation)
+
+
+def as_policy(obj: Any, info: AgentInfo) -> Policy:
+    """Turn a `Policy`, a `PolicySpec` or a plain callable into a policy for `info.agent`."""
+    if hasattr(obj, "build") and not hasattr(obj, "act"):
+        return obj.build(info)
+    if hasattr(obj, "act") and hasattr(obj, "reset"):
+        return obj
+    if callable(obj):
+        return CallablePolicy(obj)
+    raise ConfigError(
+        f"Cannot use {obj!r} as the policy of {info.agent!r}: expected a Policy (reset/act), "
+        "a PolicySpec (build) or a callable observation -> action."
+    )

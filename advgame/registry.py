@@ -1,0 +1,177 @@
+"""The scenario registry: ids -> task bases with their disruptor presets, loaded lazily.
+
+A scenario's task base and presets are ``"module:attr"`` entry points, imported only when the
+scenario is made, so listing scenarios imports no simulator. The built-in scenarios live in
+`advgame.scenarios` and register themselves when that package is first imported.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from advgame.errors import ConfigError, UnknownNameError, UnknownScenarioError, did_you_mean
+
+if TYPE_CHECKING:
+    from advgame.disruptors.base import DisruptorSpec
+    from advgame.game import Game
+
+__all__ = ["Preset", "ScenarioSpec", "list_scenarios", "load", "make", "register", "scenario_spec"]
+
+_BUILTIN = "advgame.scenarios"
+_REGISTRY: dict[str, ScenarioSpec] = {}
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A named set-up of a scenario: its disruptors and the adversaries that suit them.
+
+    Example:
+        >>> from advgame.disruptors import ObservationDisruptor
+        >>> Preset((ObservationDisruptor(eps=0.1),), description="state attack").description
+        'state attack'
+    """
+
+    disruptors: tuple[DisruptorSpec, ...]
+    """The disruptors, one adversary agent each."""
+    adversaries: Mapping[str, Any] = field(default_factory=dict)
+    """Suggested adversary policy specs by agent id (the paper's noise or schedule for it)."""
+    description: str = ""
+    """One line for `advgame list` and reports."""
+    cost_weight: float = 0.0
+    """Weight of the cost in the zero-sum payoff."""
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """A registered scenario: how to build its task base and which presets it offers."""
+
+    id: str
+    """The registry id, e.g. ``"HalfCheetah-v5"``."""
+    task: str
+    """``"module:attr"`` of a callable ``(**kwargs) -> TaskBase``."""
+    presets: str
+    """``"module:attr"`` of a callable ``(scenario_id) -> dict[str, Preset]``."""
+    task_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    """Keyword arguments for the task callable."""
+    family: str = ""
+    """Task family (``"mujoco"``, ``"box2d"``, ...), for listing."""
+    description: str = ""
+    """One line on the task."""
+    default_preset: str = "default"
+    """The preset `make` uses when given neither a preset nor disruptors."""
+
+    def load_presets(self) -> dict[str, Preset]:
+        """Import and return this scenario's presets."""
+        return load(self.presets)(self.id)
+
+    def make_task(self, **kwargs: Any) -> Any:
+        """Build the task base (the caller's kwargs override the registered ones)."""
+        return load(self.task)(**{**self.task_kwargs, **kwargs})
+
+
+def load(entry_point: str) -> Callable[..., Any]:
+    """Import ``"module:attr"``."""
+    module, _, attr = entry_point.partition(":")
+    try:
+        return getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError(f"Cannot load entry point {entry_point!r}: {exc}") from exc
+
+
+def register(spec: ScenarioSpec) -> None:
+    """Add a scenario; registering an id twice is an error."""
+    if spec.id in _REGISTRY:
+        raise ConfigError(f"Scenario {spec.id!r} is already registered.")
+    _REGISTRY[spec.id] = spec
+
+
+def _ensure_builtin() -> None:
+    importlib.import_module(_BUILTIN)
+
+
+def list_scenarios(family: str | None = None) -> list[str]:
+    """Every registered scenario id (optionally of one `family`), sorted."""
+    _ensure_builtin()
+    return sorted(k for k, s in _REGISTRY.items() if family is None or s.family == family)
+
+
+def scenario_spec(scenario_id: str) -> ScenarioSpec:
+    """The `ScenarioSpec` of `scenario_id`, with a "did you mean" for typos."""
+    _ensure_builtin()
+    try:
+        return _REGISTRY[scenario_id]
+    except KeyError:
+        raise UnknownScenarioError(
+            f"No scenario {scenario_id!r}.{did_you_mean(scenario_id, _REGISTRY)} "
+            "advgame.list_scenarios() (or `advgame list`) shows every id."
+        ) from None
+
+
+def make(
+    scenario_id: str,
+    *,
+    preset: str | None = None,
+    disruptors: Sequence[DisruptorSpec] | Mapping[str, Any] | None = None,
+    phase: str = "train",
+    cost_weight: float | None = None,
+    **task_kwargs: Any,
+) -> Game:
+    """Build the game of a registered scenario.
+
+    Args:
+        scenario_id: a registered id (see `list_scenarios`).
+        preset: a named preset of the scenario (``"default"`` when `disruptors` is not given).
+        disruptors: the disruptors instead of a preset: a list of specs, or a dict
+            ``{kind: options}`` (options a dict, or a list of dicts for several of one kind).
+        phase: ``"train"`` or ``"eval"`` (which schedules are live).
+        cost_weight: weight of the cost in the payoff (default: the preset's, else 0).
+        **task_kwargs: passed to the task base (e.g. ``render_mode``, ``max_episode_steps``).
+
+    Example:
+        >>> import advgame
+        >>> game = advgame.make("Hopper-v5", disruptors={"observation": {"eps": 0.075}})
+        >>> game.protagonists, game.adversaries
+        (('protagonist',), ('observation_adversary',))
+    """
+    from advgame.game import Game
+
+    spec = scenario_spec(scenario_id)
+    chosen = None
+    if disruptors is not None and preset is not None:
+        raise ConfigError("Give either preset=... or disruptors=..., not both.")
+    if disruptors is None:
+        presets = spec.load_presets()
+        name = preset or spec.default_preset
+        if name not in presets:
+            raise UnknownNameError(
+                f"Scenario {scenario_id!r} has no preset {name!r}.{did_you_mean(name, presets)} "
+                f"Presets: {sorted(presets)}."
+            )
+        chosen = presets[name]
+        specs = tuple(chosen.disruptors)
+    else:
+        specs = _as_specs(disruptors)
+    weight = cost_weight if cost_weight is not None else (chosen.cost_weight if chosen else 0.0)
+    game = Game(spec.make_task(**task_kwargs), specs, cost_weight=weight, phase=phase,
+                scenario_id=scenario_id)
+    game.preset = chosen
+    return game
+
+
+def _as_specs(disruptors: Sequence[DisruptorSpec] | Mapping[str, Any]) -> tuple[DisruptorSpec, ...]:
+    from advgame.disruptors import from_config
+
+    if isinstance(disruptors, Mapping):
+        out = []
+        for kind, cfg in disruptors.items():
+            for one in cfg if isinstance(cfg, (list, tuple)) else [cfg]:
+                out.append(from_config(kind, one))
+        return tuple(out)
+    if isinstance(disruptors, (str, bytes)) or not isinstance(disruptors, Sequence):
+        raise ConfigError(
+            f"disruptors must be a list of DisruptorSpec or a dict {{kind: options}}, got {disruptors!r}."
+        )
+    return tuple(disruptors)

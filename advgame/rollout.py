@@ -1,0 +1,109 @@
+"""Play whole episodes of a game with one policy per agent, and what they measure.
+
+This is the evaluation primitive: a `Policy` (or spec, or callable) per agent, a seed, an
+`EpisodeResult` with the protagonists' *true* return (what robust metrics are computed on),
+their observed return, and each adversary's clip count.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from gymnasium import spaces
+
+from advgame.errors import ConfigError
+from advgame.policy import ConstantPolicy, Policy, as_policy
+
+if TYPE_CHECKING:
+    from advgame.game import Game
+
+__all__ = ["EpisodeResult", "build_policies", "filler_action", "rollout"]
+
+
+@dataclass
+class EpisodeResult:
+    """What one episode measured."""
+
+    true_return: float = 0.0
+    """Sum of the true team reward."""
+    observed_return: float = 0.0
+    """Sum of the reward the first protagonist observed (after any reward disruptor)."""
+    cost: float = 0.0
+    """Sum of the true team cost."""
+    payoff: float = 0.0
+    """Sum of the zero-sum payoff (reward - cost_weight * cost); adversaries got its negative."""
+    length: int = 0
+    """Protagonist steps (act moves)."""
+    clipped: dict[str, int] = field(default_factory=dict)
+    """Adversary action components clipped into the budget, per adversary."""
+    terminated: bool = False
+    """Whether the episode ended by termination rather than truncation."""
+
+
+def filler_action(space: spaces.Space) -> Any:
+    """A fixed valid action for a move in which the agent's action does not count."""
+    if isinstance(space, spaces.Discrete):
+        return np.int64(space.start)
+    if isinstance(space, spaces.Box):
+        return np.clip(np.zeros(space.shape, dtype=space.dtype), space.low, space.high)
+    return space.sample()
+
+
+def build_policies(game: Game, policies: Mapping[str, Any], default: str = "noop") -> dict[str, Policy]:
+    """One `Policy` per agent of `game`.
+
+    Adversaries not in `policies` get their no-op (the identity) when `default="noop"`;
+    protagonists must always be given. Unknown agent ids are an error.
+    """
+    unknown = set(policies) - set(game.possible_agents)
+    if unknown:
+        raise ConfigError(f"Policies given for unknown agents {sorted(unknown)}; agents: {game.possible_agents}.")
+    out: dict[str, Policy] = {}
+    for agent in game.possible_agents:
+        info = game.agent_info(agent)
+        if agent in policies:
+            out[agent] = as_policy(policies[agent], info)
+        elif info.disruptor is not None and default == "noop":
+            out[agent] = ConstantPolicy(info.noop_action)
+        else:
+            raise ConfigError(f"No policy given for {agent!r}; pass one in policies={{{agent!r}: ...}}.")
+    return out
+
+
+def rollout(game: Game, policies: Mapping[str, Any], seed: int | None = None,
+            episodes: int = 1) -> list[EpisodeResult]:
+    """Play `episodes` episodes; episode ``i`` resets with ``seed + i`` (if a seed is given).
+
+    Each policy is reset with a seed derived from the episode seed, so a seeded rollout is
+    reproducible. Only agents in `game.next_movers` are asked to act; the others send a filler.
+    """
+    pols = build_policies(game, policies)
+    fillers = {a: filler_action(game.action_space(a)) for a in game.possible_agents}
+    results = []
+    for i in range(episodes):
+        ep_seed = None if seed is None else seed + i
+        seeds = np.random.SeedSequence(ep_seed).generate_state(len(pols)) if ep_seed is not None else None
+        for j, p in enumerate(pols.values()):
+            p.reset(None if seeds is None else int(seeds[j]))
+        obs, _ = game.reset(seed=ep_seed)
+        res = EpisodeResult(clipped=dict.fromkeys(game.adversaries, 0))
+        first = game.protagonists[0]
+        while game.agents:
+            movers = game.next_movers
+            actions = {a: pols[a].act(obs[a]) if a in movers else fillers[a] for a in game.agents}
+            obs, rewards, terms, truncs, infos = game.step(actions)
+            for a in game.adversaries:
+                res.clipped[a] += infos[a]["clipped"]
+            if infos[first].get("acted") and "true_reward" in infos[first]:
+                info = infos[first]
+                res.true_return += info["true_reward"]
+                res.cost += info["true_cost"]
+                res.payoff += info["payoff"]
+                res.observed_return += float(rewards[first])
+                res.length += 1
+                res.terminated = bool(terms[first])
+        results.append(res)
+    return results

@@ -1,0 +1,234 @@
+"""Task bases: the simulator tasks a game is built on, behind one small interface.
+
+A `TaskBase` hides whether the protagonists live in a single Gymnasium env, a MaMuJoCo
+ParallelEnv or a robosuite env. The game sees a dict of protagonist observations, one team
+reward, one team cost, and (for environment disruptors) a `MujocoSim` handle on the model.
+"""
+
+from __future__ import annotations
+
+import abc
+import logging
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from advgame.errors import ConfigError, UnknownNameError, did_you_mean
+
+__all__ = ["GymTask", "MujocoSim", "StepResult", "TaskBase"]
+
+log = logging.getLogger(__name__)
+
+StepResult = tuple[dict[str, Any], float, float, bool, bool, dict[str, Any]]
+"""(observations, team reward, team cost, terminated, truncated, info) of one task step."""
+
+
+class MujocoSim:
+    """A handle on a MuJoCo model and data that environment disruptors edit.
+
+    It snapshots nothing itself: disruptors record the nominal values they touch. It knows how
+    to recompile the model from its XML through `mujoco.MjSpec` (for shape changes such as body
+    lengths) and to swap the recompiled model in, keeping the simulation state.
+
+    Args:
+        owner: the object whose ``model``/``data`` attributes are the live simulation
+            (a Gymnasium ``MujocoEnv``).
+        xml_path: the model file, used to build an `MjSpec` on first use.
+    """
+
+    def __init__(self, owner: Any, xml_path: str | None) -> None:
+        self._owner = owner
+        self._xml_path = xml_path
+        self._spec: Any = None
+        self._nominal_model = owner.model
+        self._swapped = False
+        self.epoch = 0
+        """Incremented whenever a new model object is swapped in; edits made to the old one are gone."""
+
+    @property
+    def model(self) -> Any:
+        """The live `mujoco.MjModel`."""
+        return self._owner.model
+
+    @property
+    def data(self) -> Any:
+        """The live `mujoco.MjData`."""
+        return self._owner.data
+
+    @property
+    def spec(self) -> Any:
+        """An `mujoco.MjSpec` of the nominal model, parsed on first use."""
+        if self._spec is None:
+            import mujoco
+
+            if self._xml_path is None:
+                raise ConfigError("This task base has no model file; shape changes are unavailable.")
+            self._spec = mujoco.MjSpec.from_file(self._xml_path)
+        return self._spec
+
+    def body_id(self, name: str) -> int:
+        """The id of body `name`, with a helpful error for a typo."""
+        return self._id("body", name, self.model.nbody)
+
+    def geom_id(self, name: str) -> int:
+        """The id of geom `name`, with a helpful error for a typo."""
+        return self._id("geom", name, self.model.ngeom)
+
+    def joint_id(self, name: str) -> int:
+        """The id of joint `name`, with a helpful error for a typo."""
+        return self._id("joint", name, self.model.njnt)
+
+    def actuator_id(self, name: str) -> int:
+        """The id of actuator `name`, with a helpful error for a typo."""
+        return self._id("actuator", name, self.model.nu)
+
+    def names(self, kind: str) -> list[str]:
+        """All non-empty names of `kind` (``body``, ``geom``, ``joint``, ``actuator``)."""
+        count = {"body": "nbody", "geom": "ngeom", "joint": "njnt", "actuator": "nu"}[kind]
+        getter = getattr(self.model, kind)
+        return [getter(i).name for i in range(getattr(self.model, count)) if getter(i).name]
+
+    def _id(self, kind: str, name: str, count: int) -> int:
+        import mujoco
+
+        obj = {"body": mujoco.mjtObj.mjOBJ_BODY, "geom": mujoco.mjtObj.mjOBJ_GEOM,
+               "joint": mujoco.mjtObj.mjOBJ_JOINT, "actuator": mujoco.mjtObj.mjOBJ_ACTUATOR}[kind]
+        idx = mujoco.mj_name2id(self.model, obj, name)
+        if idx < 0:
+            names = self.names(kind)
+            raise UnknownNameError(
+                f"No {kind} named {name!r} in this model.{did_you_mean(name, names)} "
+                f"Known {kind} names: {names}."
+            )
+        return int(idx)
+
+    def recompile(self) -> None:
+        """Compile `spec` (after edits) and swap it in, keeping qpos/qvel/act/time."""
+        model, data = self.spec.recompile(self.model, self.data)
+        self._install(model, data)
+        self._swapped = True
+
+    def restore_model(self) -> None:
+        """Swap the nominal compiled model back in if a recompiled one is live."""
+        if not self._swapped:
+            return
+        import mujoco
+
+        data = mujoco.MjData(self._nominal_model)
+        self._install(self._nominal_model, data)
+        self._swapped = False
+
+    def _install(self, model: Any, data: Any) -> None:
+        self._owner.model = model
+        self._owner.data = data
+        self.epoch += 1
+        renderer = getattr(self._owner, "mujoco_renderer", None)
+        if renderer is not None:  # viewers hold the old model; rebuild them lazily
+            renderer.model, renderer.data = model, data
+            if hasattr(renderer, "close"):
+                renderer.close()
+            renderer._viewers, renderer.viewer = {}, None
+
+
+class TaskBase(abc.ABC):
+    """The simulator task under a game: protagonists, their spaces, one team payoff.
+
+    Subclasses wrap one kind of simulator. Observations are dicts keyed by protagonist id;
+    reward and cost are team scalars (every protagonist shares them, as in MaMuJoCo).
+    """
+
+    protagonists: tuple[str, ...]
+    """Protagonist agent ids, in a fixed order."""
+    observation_spaces: dict[str, gym.spaces.Space]
+    """Each protagonist's observation space."""
+    action_spaces: dict[str, gym.spaces.Space]
+    """Each protagonist's action space."""
+    state_space: gym.spaces.Space
+    """The space of the true global state that adversaries observe."""
+    max_episode_steps: int | None = None
+    """Truncation horizon, if the task has one."""
+
+    @abc.abstractmethod
+    def reset(self, seed: int | None) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Start an episode; return protagonist observations and the task's info."""
+
+    @abc.abstractmethod
+    def step(self, actions: Mapping[str, Any]) -> StepResult:
+        """Advance one step with each protagonist's (already disrupted) action."""
+
+    @abc.abstractmethod
+    def state(self, observations: Mapping[str, Any]) -> Any:
+        """The true global state adversaries observe, given the current true observations."""
+
+    @property
+    def sim(self) -> MujocoSim:
+        """The MuJoCo handle for environment disruptors; tasks without one raise."""
+        raise ConfigError(
+            f"{type(self).__name__} has no MuJoCo model; dynamics and force disruptors need one."
+        )
+
+    def render(self) -> Any:
+        """Render the task (as its `render_mode` says)."""
+        return None
+
+    def close(self) -> None:
+        """Release simulator resources."""
+
+
+class GymTask(TaskBase):
+    """A single-agent Gymnasium env as a task base with one protagonist, ``"protagonist"``.
+
+    Args:
+        env_id: a registered Gymnasium id, e.g. ``"HalfCheetah-v5"``.
+        cost_key: the `info` key holding a safety cost, if the task has one.
+        **kwargs: passed to `gymnasium.make` (``render_mode``, ``max_episode_steps``, ...).
+    """
+
+    AGENT = "protagonist"
+
+    def __init__(self, env_id: str, cost_key: str | None = None, **kwargs: Any) -> None:
+        kwargs.setdefault("disable_env_checker", True)
+        self.env = gym.make(env_id, **kwargs)
+        self.env_id = env_id
+        self.cost_key = cost_key
+        self.protagonists = (self.AGENT,)
+        self.observation_spaces = {self.AGENT: self.env.observation_space}
+        self.action_spaces = {self.AGENT: self.env.action_space}
+        self.state_space = self.env.observation_space
+        self.max_episode_steps = self.env.spec.max_episode_steps if self.env.spec else None
+        self._sim: MujocoSim | None = None
+
+    def reset(self, seed: int | None) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Reset the Gymnasium env with `seed`."""
+        obs, info = self.env.reset(seed=seed)
+        return {self.AGENT: obs}, info
+
+    def step(self, actions: Mapping[str, Any]) -> StepResult:
+        """Step the Gymnasium env with the protagonist's action."""
+        obs, reward, terminated, truncated, info = self.env.step(actions[self.AGENT])
+        cost = float(info.get(self.cost_key, 0.0)) if self.cost_key else 0.0
+        return {self.AGENT: obs}, float(reward), cost, bool(terminated), bool(truncated), info
+
+    def state(self, observations: Mapping[str, Any]) -> Any:
+        """The protagonist's true observation is the state."""
+        return observations[self.AGENT]
+
+    @property
+    def sim(self) -> MujocoSim:
+        """The MuJoCo handle (MuJoCo tasks only)."""
+        if self._sim is None:
+            inner = self.env.unwrapped
+            if not hasattr(inner, "model") or not hasattr(inner, "data"):
+                return super().sim
+            self._sim = MujocoSim(inner, getattr(inner, "fullpath", None))
+        return self._sim
+
+    def render(self) -> Any:
+        """Render through the Gymnasium env."""
+        return self.env.render()
+
+    def close(self) -> None:
+        """Close the Gymnasium env."""
+        self.env.close()

@@ -1,0 +1,163 @@
+"""Single-agent views: one agent of a game as a `gymnasium.Env`, the others frozen inside it.
+
+A view lets any Stable-Baselines3 algorithm train either side: the protagonist against frozen
+adversaries, or one adversary against a frozen protagonist (and frozen fellow adversaries).
+One view step is one decision of the learning agent: the view plays the moves in between
+(sense moves, steps its schedule skips) with the embedded policies and sums the learner's
+reward over them. Under `SubprocVecEnv`, build views in the workers with `view_factory`.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from advgame.errors import ConfigError
+from advgame.game import Game
+from advgame.rollout import build_policies, filler_action
+
+__all__ = ["SingleAgentView", "view_factory"]
+
+
+class SingleAgentView(gym.Env):
+    """`agent` of `game` as a Gymnasium env; every other agent plays its policy in `policies`.
+
+    Adversaries missing from `policies` play their no-op (the nominal task); a protagonist
+    must be given whenever the learner is an adversary.
+
+    Info of each step: the learner's last info, with ``true_reward``, ``true_cost`` and
+    ``payoff`` summed over the moves the step covered (for adversaries too, for logging).
+
+    Example:
+        >>> import advgame
+        >>> game = advgame.make("Hopper-v5", disruptors={"observation": {"eps": 0.05}})
+        >>> env = SingleAgentView(game, "protagonist")
+        >>> obs, info = env.reset(seed=0)
+        >>> env.observation_space.contains(obs)
+        True
+    """
+
+    def __init__(self, game: Game, agent: str, policies: Mapping[str, Any] | None = None) -> None:
+        if agent not in game.possible_agents:
+            game.observation_space(agent)  # raises the "did you mean" error
+        self.game = game
+        self.agent = agent
+        others = {a: p for a, p in (policies or {}).items() if a != agent}
+        if policies and agent in policies:
+            raise ConfigError(f"{agent!r} is the learner of this view; do not pass a policy for it.")
+        probe = {agent: _Placeholder(), **others}
+        self.policies = {a: p for a, p in build_policies(game, probe).items() if a != agent}
+        disruptor = game.disruptors.get(agent)
+        if disruptor is not None and not disruptor.schedule.in_phase(game.phase):
+            raise ConfigError(
+                f"{agent!r} never acts in phase {game.phase!r} (its schedule is for "
+                f"{disruptor.schedule.phase!r}); a view of it would have no decisions."
+            )
+        self.observation_space = game.observation_space(agent)
+        self.action_space = game.action_space(agent)
+        self.render_mode = getattr(getattr(game.task, "env", None), "render_mode", None)
+        self._fillers = {a: filler_action(game.action_space(a)) for a in game.possible_agents}
+        self._obs: dict[str, Any] = {}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
+        """Reset the game and the embedded policies; play until the learner's first decision."""
+        super().reset(seed=seed)
+        if seed is not None:
+            seeds = np.random.SeedSequence(seed).generate_state(len(self.policies))
+            for s, p in zip(seeds, self.policies.values(), strict=True):
+                p.reset(int(s))
+        else:
+            for p in self.policies.values():
+                p.reset(None)
+        for _ in range(100):
+            self._obs, infos = self.game.reset(seed=seed, options=options)
+            info: dict[str, Any] = dict(infos[self.agent])
+            _, _, _, _, done = self._advance(0.0, info)
+            if not done:
+                return self._obs[self.agent], info
+            seed = None  # the learner had no decision this episode; draw another
+        raise ConfigError(f"{self.agent!r} got no decision in 100 episodes; check its schedule.")
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
+        """One decision of the learner, then the moves until its next one (or the episode end)."""
+        actions = self._others()
+        actions[self.agent] = action
+        self._obs, rewards, terms, truncs, infos = self.game.step(actions)
+        info: dict[str, Any] = {}
+        reward = self._collect(float(rewards[self.agent]), infos, info)
+        reward, terminated, truncated, info, _ = self._advance(reward, info, terms, truncs)
+        return self._obs[self.agent], reward, terminated, truncated, info
+
+    def _advance(self, reward: float, info: dict, terms: dict | None = None,
+                 truncs: dict | None = None) -> tuple[float, bool, bool, dict, bool]:
+        terms = terms or {}
+        truncs = truncs or {}
+        while self.game.agents and self.agent not in self.game.next_movers:
+            self._obs, rewards, terms, truncs, infos = self.game.step(self._others())
+            reward = self._collect(reward + float(rewards[self.agent]), infos, info)
+        terminated = bool(terms.get(self.agent, False))
+        truncated = bool(truncs.get(self.agent, False))
+        return reward, terminated, truncated, info, not self.game.agents
+
+    def _collect(self, reward: float, infos: dict, info: dict) -> float:
+        first = self.game.protagonists[0]
+        proto = infos[first]
+        if "true_reward" in proto:
+            for key in ("true_reward", "true_cost", "payoff"):
+                info[key] = info.get(key, 0.0) + proto[key]
+        for k, v in infos[self.agent].items():
+            if k not in ("true_reward", "true_cost", "payoff"):
+                info[k] = v
+        return reward
+
+    def _others(self) -> dict[str, Any]:
+        movers = self.game.next_movers
+        obs = self._obs
+        out = {a: p.act(obs[a]) if a in movers else self._fillers[a] for a, p in self.policies.items()}
+        out[self.agent] = self._fillers[self.agent]
+        return out
+
+    def render(self) -> Any:
+        """Render the game's task base."""
+        return self.game.render()
+
+    def close(self) -> None:
+        """Close the game."""
+        self.game.close()
+
+
+class _Placeholder:
+    """Stands in for the learner while the other agents' policies are built."""
+
+    def reset(self, seed: int | None = None) -> None:
+        """Unused."""
+
+    def act(self, observation: Any) -> Any:
+        """Unused."""
+        raise AssertionError("the learner's placeholder policy is never queried")
+
+
+def _build_view(scenario_id: str, agent: str, policies: Mapping[str, Any],
+                make_kwargs: Mapping[str, Any]) -> SingleAgentView:
+    from advgame.registry import make
+
+    return SingleAgentView(make(scenario_id, **make_kwargs), agent, policies)
+
+
+def view_factory(scenario_id: str, agent: str, policies: Mapping[str, Any] | None = None,
+                 **make_kwargs: Any) -> Callable[[], SingleAgentView]:
+    """A picklable thunk that builds the game and the view (in a `SubprocVecEnv` worker).
+
+    `policies` must be picklable: policy specs, or policies whose state pickles.
+
+    Example:
+        >>> from stable_baselines3.common.vec_env import DummyVecEnv
+        >>> venv = DummyVecEnv([view_factory("Hopper-v5", "protagonist", preset="default")])
+        >>> venv.observation_space.shape
+        (11,)
+    """
+    return functools.partial(_build_view, scenario_id, agent, dict(policies or {}), dict(make_kwargs))

@@ -1,0 +1,7 @@
+"""Protagonist learners (Stable-Baselines3 wrappers and compact torch learners)."""
+
+if __name__ != "advgame.agents":  # pragma: no cover - packaging guard
+    raise ImportError(
+        "This folder is installed as `advgame.agents`; import it under that name "
+        "(pip install -e . from the repository root), not as the bare `agents`."
+    )

@@ -1,0 +1,40 @@
+"""Built-in scenarios: task bases and their disruptor presets, registered under ids.
+
+Importing this package registers every built-in scenario (one line each below); the task
+bases and presets themselves are imported only when a scenario is made.
+"""
+
+if __name__ != "advgame.scenarios":  # pragma: no cover - packaging guard
+    raise ImportError(
+        "This folder is installed as `advgame.scenarios`; import it under that name "
+        "(pip install -e . from the repository root), not as the bare `scenarios`."
+    )
+
+from advgame.registry import ScenarioSpec, register
+
+_MUJOCO = "advgame.scenarios.mujoco"
+_BOX2D = "advgame.scenarios.box2d"
+
+
+def _gym(env_id: str, family: str, module: str, description: str) -> None:
+    register(ScenarioSpec(id=env_id, task=f"{module}:make_task", presets=f"{module}:presets",
+                          task_kwargs={"env_id": env_id}, family=family, description=description))
+
+
+# Gymnasium MuJoCo v5: observation, reward, action, dynamics and force disruptors.
+_gym("Ant-v5", "mujoco", _MUJOCO, "quadruped locomotion")
+_gym("HalfCheetah-v5", "mujoco", _MUJOCO, "planar running")
+_gym("Hopper-v5", "mujoco", _MUJOCO, "planar one-legged hopping")
+_gym("Walker2d-v5", "mujoco", _MUJOCO, "planar biped walking")
+_gym("Swimmer-v5", "mujoco", _MUJOCO, "three-link swimming in a viscous fluid")
+_gym("Humanoid-v5", "mujoco", _MUJOCO, "3D humanoid running")
+_gym("HumanoidStandup-v5", "mujoco", _MUJOCO, "3D humanoid standing up")
+_gym("Pusher-v5", "mujoco", _MUJOCO, "7-DoF arm pushing an object to a goal")
+_gym("Reacher-v5", "mujoco", _MUJOCO, "2-link arm reaching a target")
+_gym("InvertedPendulum-v5", "mujoco", _MUJOCO, "cart-pole balancing")
+_gym("InvertedDoublePendulum-v5", "mujoco", _MUJOCO, "double cart-pole balancing")
+# Gymnasium Box2D: observation, reward and action disruptors.
+_gym("BipedalWalker-v3", "box2d", _BOX2D, "2D biped over rough terrain")
+_gym("CarRacing-v3", "box2d", _BOX2D, "top-down racing from 96x96 pixels")
+_gym("LunarLander-v3", "box2d", _BOX2D, "lander with four discrete engine actions")
+_gym("LunarLanderContinuous-v3", "box2d", _BOX2D, "lander with continuous throttles")
