@@ -21,7 +21,9 @@ true next state; the protagonists act on the perturbed one the sense move return
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -34,11 +36,37 @@ from advgame.policy import AgentInfo
 from advgame.schedule import PHASES
 from advgame.task import TaskBase
 
-__all__ = ["Game"]
+__all__ = ["Game", "Move"]
 
 log = logging.getLogger(__name__)
 
 SENSE, ACT = "sense", "act"
+
+
+@dataclass(slots=True)
+class Move:
+    """The outcome of one move in lean form (`Game.play`)."""
+
+    kind: str
+    """``"sense"`` or ``"act"``."""
+    clipped: dict[str, int]
+    """Adversaries whose action counted in this move -> components clipped into the budget."""
+    rewards: dict[str, float] | None = None
+    """Act moves: the reward each protagonist observes (after reward disruptors)."""
+    costs: dict[str, float] | None = None
+    """Act moves: the cost each protagonist observes (after cost disruptors)."""
+    reward: float = 0.0
+    """Act moves: the true team reward."""
+    cost: float = 0.0
+    """Act moves: the true team cost."""
+    payoff: float = 0.0
+    """Act moves: the true payoff ``reward - cost_weight * cost``; adversaries get its negative."""
+    terminated: bool = False
+    """The episode terminated."""
+    truncated: bool = False
+    """The episode was truncated."""
+    info: dict[str, Any] | None = None
+    """Act moves: the task base's info."""
 
 
 class Game(ParallelEnv):
@@ -150,21 +178,39 @@ class Game(ParallelEnv):
         self.t = 0
         self.agents = list(self.possible_agents)
         self._last = {}
-        observations = self._begin_step(obs, pending=None)
+        self._begin_step(obs, pending=None)
+        observations = {**self._shown, **dict.fromkeys(self.adversaries, self._state)}
         infos: dict[str, dict] = {a: {} for a in self.agents}
         for p in self.protagonists:
             infos[p] = dict(info)
         return observations, infos
 
     def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
-        """Make one move; see the module docstring for sense and act moves."""
+        """Make one move (PettingZoo form); see the module docstring for sense and act moves."""
         if not self.agents:
             raise ActionError("The episode is over (no live agents); call reset() before step().")
         if actions.keys() != self._all:
             self._bad_keys(actions)
+        return self._package(self.play(actions))
+
+    def play(self, actions: Mapping[str, Any]) -> Move:
+        """Make one move, lean form: `actions` needs only the agents in `next_movers`.
+
+        Same semantics as `step` without building the per-agent dicts; rollouts and
+        single-agent views use it. Current observations: `observe`.
+        """
+        if not self.agents:
+            raise ActionError("The episode is over (no live agents); call reset() before play().")
+        if not self.next_movers.issubset(actions):
+            missing = sorted(self.next_movers - set(actions))
+            raise ActionError(f"This {self.move} move needs actions for {missing} (game.next_movers).")
         if self.move == SENSE:
             return self._sense(actions)
         return self._act(actions)
+
+    def observe(self, agent: str) -> Any:
+        """What `agent` observes now: protagonists the (perturbed) observation, adversaries ``s_t``."""
+        return self._shown[agent] if agent in self._shown else self._state
 
     def render(self) -> Any:
         """Render the task base."""
@@ -175,37 +221,28 @@ class Game(ParallelEnv):
         self.task.close()
 
     # -- moves ------------------------------------------------------------------------------
-    def _sense(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+    def _sense(self, actions: Mapping[str, Any]) -> Move:
         shown = dict(self._shown)
-        acted = {}
+        clipped = {}
         for d in self._sensing:
             if self._active[d.agent]:
-                u, n = d.decode(actions[d.agent])
+                u, clipped[d.agent] = d.decode(actions[d.agent])
                 self._last[d.agent] = u
                 d.observation(shown, u)
-                acted[d.agent] = n
         self._shown = shown
         self.move = ACT
         self.next_movers = self._act_movers()
-        obs = {**shown, **dict.fromkeys(self.adversaries, self._state)}
-        zeros = dict.fromkeys(self.possible_agents, 0.0)
-        false = dict.fromkeys(self.possible_agents, False)
-        infos = {a: {"acted": a in acted, "clipped": acted.get(a, 0)} for a in self.possible_agents}
-        return obs, zeros, false, dict(false), infos
+        return Move(SENSE, clipped)
 
-    def _act(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+    def _act(self, actions: Mapping[str, Any]) -> Move:
         used: dict[str, np.ndarray] = {}
         clipped: dict[str, int] = {}
         for d in self._act_ds:
             if self._active[d.agent]:
                 used[d.agent], clipped[d.agent] = d.decode(actions[d.agent])
                 self._last[d.agent] = used[d.agent]
-        sim_epoch = self.task.sim.epoch if self._env_ds else 0
-        for d in self._env_ds:
-            d.environment(self.task.sim, used.get(d.agent))
-        if self._env_ds and self.task.sim.epoch != sim_epoch:  # a recompile dropped earlier edits
-            for d in self._env_ds:
-                d.environment(self.task.sim, None)
+        if self._env_ds:
+            self._disrupt_environment(used)
         acts = {p: self._protagonist_action(p, actions[p]) for p in self.protagonists}
         for d in self._action_ds:
             u = self._effective(d, used)
@@ -220,24 +257,46 @@ class Game(ParallelEnv):
             if u is not None:
                 d.reward(rewards, costs, u)
         self.t += 1
-        done = terminated or truncated
-        observations = self._begin_step(obs, pending=used) if not done else self._final_obs(obs)
-        rewards.update(dict.fromkeys(self.adversaries, -payoff))
-        infos: dict[str, dict] = {}
-        for p in self.protagonists:
-            infos[p] = {**info, "acted": True, "true_reward": reward, "true_cost": cost,
-                        "cost": costs[p], "payoff": payoff}
-        for a in self.adversaries:
-            infos[a] = {"acted": a in used, "clipped": clipped.get(a, 0)}
-        terms = dict.fromkeys(self.possible_agents, terminated)
-        truncs = dict.fromkeys(self.possible_agents, truncated)
-        if done:
+        if terminated or truncated:
+            self._true_obs = self._shown = obs
+            self._state = self.task.state(obs)
             self.agents = []
             self.next_movers = frozenset()
-        return observations, rewards, terms, truncs, infos
+        else:
+            self._begin_step(obs, pending=used)
+        return Move(ACT, clipped, rewards, costs, reward, cost, payoff, terminated, truncated, info)
+
+    def _package(self, m: Move) -> tuple[dict, dict, dict, dict, dict]:
+        obs = {**self._shown, **dict.fromkeys(self.adversaries, self._state)}
+        clipped = m.clipped
+        infos: dict[str, dict] = {}
+        if m.kind == SENSE:
+            rewards = dict.fromkeys(self.possible_agents, 0.0)
+            for p in self.protagonists:
+                infos[p] = {"acted": False}
+        else:
+            assert m.rewards is not None and m.costs is not None and m.info is not None
+            rewards = {**m.rewards, **dict.fromkeys(self.adversaries, -m.payoff)}
+            for p in self.protagonists:
+                infos[p] = {**m.info, "acted": True, "true_reward": m.reward, "true_cost": m.cost,
+                            "cost": m.costs[p], "payoff": m.payoff}
+        for a in self.adversaries:
+            infos[a] = {"acted": a in clipped, "clipped": clipped.get(a, 0)}
+        terms = dict.fromkeys(self.possible_agents, m.terminated)
+        truncs = dict.fromkeys(self.possible_agents, m.truncated)
+        return obs, rewards, terms, truncs, infos
+
+    def _disrupt_environment(self, used: dict[str, np.ndarray]) -> None:
+        sim = self.task.sim
+        epoch = sim.epoch
+        for d in self._env_ds:
+            d.environment(sim, used.get(d.agent))
+        if sim.epoch != epoch:  # a recompiled model dropped edits made before it this step
+            for d in self._env_ds:
+                d.environment(sim, None)
 
     # -- helpers ----------------------------------------------------------------------------
-    def _begin_step(self, obs: dict[str, Any], pending: dict[str, np.ndarray] | None) -> dict:
+    def _begin_step(self, obs: dict[str, Any], pending: dict[str, np.ndarray] | None) -> None:
         """Record the true state of step t, draw its schedule, and build what agents see."""
         self._true_obs = obs
         self._state = self.task.state(obs)
@@ -262,12 +321,6 @@ class Game(ParallelEnv):
             self.next_movers = frozenset(d.agent for d in self._sensing if self._active[d.agent])
         else:
             self.next_movers = self._act_movers()
-        return {**shown, **dict.fromkeys(self.adversaries, self._state)}
-
-    def _final_obs(self, obs: dict[str, Any]) -> dict:
-        self._true_obs = obs
-        self._state = self.task.state(obs)
-        return {**obs, **dict.fromkeys(self.adversaries, self._state)}
 
     def _act_movers(self) -> frozenset[str]:
         return frozenset([*self.protagonists, *(d.agent for d in self._act_ds if self._active[d.agent])])
@@ -285,10 +338,12 @@ class Game(ParallelEnv):
             if not ok:
                 raise ActionError(f"Action for {agent!r} must be an int in {space}, got {action!r}.")
             return np.int64(action)
-        a = np.asarray(action, dtype=space.dtype)
+        a = np.asarray(action)
+        if a.dtype != space.dtype:
+            a = a.astype(space.dtype)
         if a.shape != space.shape:
             raise ActionError(f"Action for {agent!r} has shape {a.shape}; expected {space.shape} ({space}).")
-        if not np.isfinite(a).all():
+        if not math.isfinite(a.dot(a)) and not np.isfinite(a).all():  # dot: one cheap pass
             raise ActionError(f"Action for {agent!r} contains NaN or inf: {a}.")
         return a
 

@@ -78,32 +78,28 @@ def rollout(game: Game, policies: Mapping[str, Any], seed: int | None = None,
     """Play `episodes` episodes; episode ``i`` resets with ``seed + i`` (if a seed is given).
 
     Each policy is reset with a seed derived from the episode seed, so a seeded rollout is
-    reproducible. Only agents in `game.next_movers` are asked to act; the others send a filler.
+    reproducible. Only agents in `game.next_movers` are asked to act (`Game.play`).
     """
     pols = build_policies(game, policies)
-    fillers = {a: filler_action(game.action_space(a)) for a in game.possible_agents}
     results = []
     for i in range(episodes):
         ep_seed = None if seed is None else seed + i
         seeds = np.random.SeedSequence(ep_seed).generate_state(len(pols)) if ep_seed is not None else None
         for j, p in enumerate(pols.values()):
             p.reset(None if seeds is None else int(seeds[j]))
-        obs, _ = game.reset(seed=ep_seed)
+        game.reset(seed=ep_seed)
         res = EpisodeResult(clipped=dict.fromkeys(game.adversaries, 0))
         first = game.protagonists[0]
         while game.agents:
-            movers = game.next_movers
-            actions = {a: pols[a].act(obs[a]) if a in movers else fillers[a] for a in game.agents}
-            obs, rewards, terms, truncs, infos = game.step(actions)
-            for a in game.adversaries:
-                res.clipped[a] += infos[a]["clipped"]
-            if infos[first].get("acted") and "true_reward" in infos[first]:
-                info = infos[first]
-                res.true_return += info["true_reward"]
-                res.cost += info["true_cost"]
-                res.payoff += info["payoff"]
-                res.observed_return += float(rewards[first])
+            move = game.play({a: pols[a].act(game.observe(a)) for a in game.next_movers})
+            for a, n in move.clipped.items():
+                res.clipped[a] += n
+            if move.rewards is not None:
+                res.true_return += move.reward
+                res.cost += move.cost
+                res.payoff += move.payoff
+                res.observed_return += move.rewards[first]
                 res.length += 1
-                res.terminated = bool(terms[first])
+                res.terminated = move.terminated
         results.append(res)
     return results

@@ -199,15 +199,36 @@ class GymTask(TaskBase):
         self.state_space = self.env.observation_space
         self.max_episode_steps = self.env.spec.max_episode_steps if self.env.spec else None
         self._sim: MujocoSim | None = None
+        self._inner = self.env.unwrapped if self._plain_wrappers(self.env) else self.env
+        self._steps = 0
+
+    @staticmethod
+    def _plain_wrappers(env: gym.Env) -> bool:
+        """Whether every wrapper is one the game replaces (time limit, order, env checker)."""
+        from gymnasium.wrappers import OrderEnforcing, PassiveEnvChecker, TimeLimit
+
+        while isinstance(env, gym.Wrapper):
+            if not isinstance(env, (TimeLimit, OrderEnforcing, PassiveEnvChecker)):
+                return False
+            env = env.env
+        return True
 
     def reset(self, seed: int | None) -> tuple[dict[str, Any], dict[str, Any]]:
         """Reset the Gymnasium env with `seed`."""
         obs, info = self.env.reset(seed=seed)
+        self._steps = 0
         return {self.AGENT: obs}, info
 
     def step(self, actions: Mapping[str, Any]) -> StepResult:
-        """Step the Gymnasium env with the protagonist's action."""
-        obs, reward, terminated, truncated, info = self.env.step(actions[self.AGENT])
+        """Step the Gymnasium env with the protagonist's action.
+
+        The game enforces call order and the time limit itself, so the unwrapped env is stepped
+        directly (skipping the `TimeLimit`/`OrderEnforcing` wrappers' per-step overhead).
+        """
+        obs, reward, terminated, truncated, info = self._inner.step(actions[self.AGENT])
+        self._steps += 1
+        if self.max_episode_steps is not None and self._steps >= self.max_episode_steps:
+            truncated = True
         cost = float(info.get(self.cost_key, 0.0)) if self.cost_key else 0.0
         return {self.AGENT: obs}, float(reward), cost, bool(terminated), bool(truncated), info
 

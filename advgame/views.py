@@ -18,7 +18,7 @@ import numpy as np
 
 from advgame.errors import ConfigError
 from advgame.game import Game
-from advgame.rollout import build_policies, filler_action
+from advgame.rollout import build_policies
 
 __all__ = ["SingleAgentView", "view_factory"]
 
@@ -29,8 +29,10 @@ class SingleAgentView(gym.Env):
     Adversaries missing from `policies` play their no-op (the nominal task); a protagonist
     must be given whenever the learner is an adversary.
 
-    Info of each step: the learner's last info, with ``true_reward``, ``true_cost`` and
-    ``payoff`` summed over the moves the step covered (for adversaries too, for logging).
+    Reward of a step: the learner's reward summed over the moves it covered (a protagonist's
+    observed reward; an adversary's ``-payoff``). Info: ``true_reward``, ``true_cost`` and
+    ``payoff`` summed likewise, ``clipped`` (adversaries), and for protagonists the task's last
+    info and the observed ``cost``.
 
     Example:
         >>> import advgame
@@ -60,8 +62,7 @@ class SingleAgentView(gym.Env):
         self.observation_space = game.observation_space(agent)
         self.action_space = game.action_space(agent)
         self.render_mode = getattr(getattr(game.task, "env", None), "render_mode", None)
-        self._fillers = {a: filler_action(game.action_space(a)) for a in game.possible_agents}
-        self._obs: dict[str, Any] = {}
+        self._protagonist = agent in game.protagonists
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         """Reset the game and the embedded policies; play until the learner's first decision."""
@@ -74,11 +75,12 @@ class SingleAgentView(gym.Env):
             for p in self.policies.values():
                 p.reset(None)
         for _ in range(100):
-            self._obs, infos = self.game.reset(seed=seed, options=options)
+            _, infos = self.game.reset(seed=seed, options=options)
             info: dict[str, Any] = dict(infos[self.agent])
-            _, _, _, _, done = self._advance(0.0, info)
-            if not done:
-                return self._obs[self.agent], info
+            while self.game.agents and self.agent not in self.game.next_movers:
+                self._play(self._others(), _Tally())
+            if self.game.agents:
+                return self.game.observe(self.agent), info
             seed = None  # the learner had no decision this episode; draw another
         raise ConfigError(f"{self.agent!r} got no decision in 100 episodes; check its schedule.")
 
@@ -86,40 +88,34 @@ class SingleAgentView(gym.Env):
         """One decision of the learner, then the moves until its next one (or the episode end)."""
         actions = self._others()
         actions[self.agent] = action
-        self._obs, rewards, terms, truncs, infos = self.game.step(actions)
-        info: dict[str, Any] = {}
-        reward = self._collect(float(rewards[self.agent]), infos, info)
-        reward, terminated, truncated, info, _ = self._advance(reward, info, terms, truncs)
-        return self._obs[self.agent], reward, terminated, truncated, info
-
-    def _advance(self, reward: float, info: dict, terms: dict | None = None,
-                 truncs: dict | None = None) -> tuple[float, bool, bool, dict, bool]:
-        terms = terms or {}
-        truncs = truncs or {}
+        tally = _Tally()
+        self._play(actions, tally)
         while self.game.agents and self.agent not in self.game.next_movers:
-            self._obs, rewards, terms, truncs, infos = self.game.step(self._others())
-            reward = self._collect(reward + float(rewards[self.agent]), infos, info)
-        terminated = bool(terms.get(self.agent, False))
-        truncated = bool(truncs.get(self.agent, False))
-        return reward, terminated, truncated, info, not self.game.agents
+            self._play(self._others(), tally)
+        return self.game.observe(self.agent), tally.reward, tally.terminated, tally.truncated, tally.info
 
-    def _collect(self, reward: float, infos: dict, info: dict) -> float:
-        first = self.game.protagonists[0]
-        proto = infos[first]
-        if "true_reward" in proto:
-            for key in ("true_reward", "true_cost", "payoff"):
-                info[key] = info.get(key, 0.0) + proto[key]
-        for k, v in infos[self.agent].items():
-            if k not in ("true_reward", "true_cost", "payoff"):
-                info[k] = v
-        return reward
+    def _play(self, actions: dict[str, Any], tally: _Tally) -> None:
+        move = self.game.play(actions)
+        info = tally.info
+        if self.agent in move.clipped:
+            info["clipped"] = info.get("clipped", 0) + move.clipped[self.agent]
+        if move.rewards is None:  # a sense move: no payoff accrues
+            return
+        assert move.costs is not None and move.info is not None
+        if self._protagonist:
+            info.update(move.info)
+            tally.reward += move.rewards[self.agent]
+            info["cost"] = info.get("cost", 0.0) + move.costs[self.agent]
+        else:
+            tally.reward -= move.payoff
+        for key, value in (("true_reward", move.reward), ("true_cost", move.cost),
+                           ("payoff", move.payoff)):
+            info[key] = info.get(key, 0.0) + value
+        tally.terminated, tally.truncated = move.terminated, move.truncated
 
     def _others(self) -> dict[str, Any]:
-        movers = self.game.next_movers
-        obs = self._obs
-        out = {a: p.act(obs[a]) if a in movers else self._fillers[a] for a, p in self.policies.items()}
-        out[self.agent] = self._fillers[self.agent]
-        return out
+        game = self.game
+        return {a: self.policies[a].act(game.observe(a)) for a in game.next_movers if a != self.agent}
 
     def render(self) -> Any:
         """Render the game's task base."""
@@ -128,6 +124,18 @@ class SingleAgentView(gym.Env):
     def close(self) -> None:
         """Close the game."""
         self.game.close()
+
+
+class _Tally:
+    """What one view step accumulates over the moves it covers."""
+
+    __slots__ = ("info", "reward", "terminated", "truncated")
+
+    def __init__(self) -> None:
+        self.reward = 0.0
+        self.terminated = False
+        self.truncated = False
+        self.info: dict[str, Any] = {}
 
 
 class _Placeholder:

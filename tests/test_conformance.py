@@ -1,0 +1,159 @@
+"""Conformance of every registered scenario and preset, straight from the registry.
+
+For each (scenario id, preset) pair the registry offers:
+
+* PettingZoo's own `parallel_api_test` and `parallel_seed_test`, with every warning an error;
+* the project's game checks: spaces are cached objects, adversaries have `Box` action spaces,
+  ``infos[agent]["acted"]`` agrees with `Game.next_movers`, payoffs are zero-sum on the *true*
+  payoff, and two games reset with the same seed replay the same episode move by move (PettingZoo's
+  `parallel_seed_test` stops after the first move, so the full-episode comparison is ours).
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+import advgame
+from advgame.registry import scenario_spec
+
+SLOW = {"CarRacing-v3"}
+"""Scenarios whose reset is expensive (CarRacing builds a track): fewer cycles."""
+
+CASES = [
+    pytest.param(sid, name, id=f"{sid}:{name}")
+    for sid in advgame.list_scenarios()
+    for name in scenario_spec(sid).load_presets()
+]
+
+EPISODE_STEPS = 40
+"""Protagonist steps per episode in the game checks (a truncation horizon passed to the task)."""
+
+
+def _cycles(sid: str) -> int:
+    return 30 if sid in SLOW else 200
+
+
+def _assert_same(a: Any, b: Any, where: str) -> None:
+    """Exact, recursive equality of two step outputs (dicts, arrays, scalars)."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and a.keys() == b.keys(), f"{where}: keys {a.keys()} != {b.keys()}"
+        for k in a:
+            _assert_same(a[k], b[k], f"{where}[{k!r}]")
+    elif isinstance(a, (tuple, list)):
+        assert type(a) is type(b) and len(a) == len(b), f"{where}: {a!r} != {b!r}"
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _assert_same(x, y, f"{where}[{i}]")
+    elif isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a_arr, b_arr = np.asarray(a), np.asarray(b)
+        assert a_arr.dtype == b_arr.dtype, f"{where}: dtype {a_arr.dtype} != {b_arr.dtype}"
+        assert np.array_equal(a_arr, b_arr), f"{where}: {a_arr} != {b_arr}"
+    else:
+        assert type(a) is type(b) and a == b, f"{where}: {a!r} != {b!r}"
+
+
+def _seed_spaces(game: advgame.Game, seed: int) -> None:
+    for i, agent in enumerate(game.possible_agents):
+        game.action_space(agent).seed(seed + i)
+
+
+@pytest.mark.parametrize(("sid", "preset"), CASES)
+def test_pettingzoo_parallel_api(sid: str, preset: str) -> None:
+    game = advgame.make(sid, preset=preset)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            parallel_api_test(game, num_cycles=_cycles(sid))
+    finally:
+        game.close()
+
+
+@pytest.mark.parametrize(("sid", "preset"), CASES)
+def test_pettingzoo_parallel_seed(sid: str, preset: str) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        parallel_seed_test(lambda: advgame.make(sid, preset=preset), num_cycles=_cycles(sid))
+
+
+@pytest.mark.parametrize(("sid", "preset"), CASES)
+def test_spaces_cached_and_adversaries_bounded_boxes(sid: str, preset: str) -> None:
+    game = advgame.make(sid, preset=preset)
+    spec = scenario_spec(sid).load_presets()[preset]
+    assert game.adversaries == tuple(d.agent for d in spec.disruptors)
+    assert game.possible_agents == [*game.protagonists, *game.adversaries]
+    for agent in game.possible_agents:
+        assert game.observation_space(agent) is game.observation_space(agent)
+        assert game.action_space(agent) is game.action_space(agent)
+    for agent in game.adversaries:
+        space = game.action_space(agent)
+        assert isinstance(space, spaces.Box), f"{agent}: {space}"
+        disruptor = game.disruptors[agent]
+        if disruptor.bounded:  # the budget lives in the disruptor; the action is normalized
+            assert np.all(space.low == -1.0) and np.all(space.high == 1.0), f"{agent}: {space}"
+        # adversaries observe the true state
+        assert game.observation_space(agent) is game.state_space
+    game.close()
+
+
+def _play_checked(game: advgame.Game, seed: int) -> list[tuple]:
+    """One episode of random actions, checking zero-sum payoffs and `acted` on every move.
+
+    Returns every move's outputs, for the determinism comparison.
+    """
+    obs, infos = game.reset(seed=seed)
+    _seed_spaces(game, seed)
+    moves: list[tuple] = [(obs, infos)]
+    act_moves = 0
+    while game.agents:
+        movers = game.next_movers
+        assert movers, "a live game must say whose action the next move uses"
+        assert movers <= set(game.agents)
+        sense = not any(p in movers for p in game.protagonists)
+        if sense:  # only observation adversaries move on a sense move
+            assert all(game.disruptors[a].hook == "observation" for a in movers), movers
+        else:
+            assert set(game.protagonists) <= movers
+        t = game.t
+        actions = {a: game.action_space(a).sample() for a in game.agents}
+        obs, rewards, terms, truncs, infos = game.step(actions)
+        moves.append((obs, rewards, terms, truncs, infos))
+        assert set(obs) == set(rewards) == set(terms) == set(truncs) == set(infos)
+        assert set(infos) == set(game.possible_agents)
+        for agent in game.possible_agents:
+            assert infos[agent]["acted"] == (agent in movers), (agent, movers, infos[agent])
+        if sense:
+            assert game.t == t
+            for agent in game.possible_agents:
+                assert rewards[agent] == 0.0
+            continue
+        act_moves += 1
+        assert game.t == t + 1
+        for p in game.protagonists:
+            info = infos[p]
+            assert info["payoff"] == info["true_reward"] - game.cost_weight * info["true_cost"]
+        payoff = infos[game.protagonists[0]]["payoff"]
+        assert all(infos[p]["payoff"] == payoff for p in game.protagonists)  # one team payoff
+        for adversary in game.adversaries:
+            assert rewards[adversary] == -payoff, (adversary, rewards[adversary], payoff)
+    assert 0 < act_moves <= EPISODE_STEPS
+    assert game.t == act_moves
+    return moves
+
+
+@pytest.mark.parametrize(("sid", "preset"), CASES)
+def test_zero_sum_acted_and_full_episode_determinism(sid: str, preset: str) -> None:
+    games = [advgame.make(sid, preset=preset, max_episode_steps=EPISODE_STEPS) for _ in range(2)]
+    for phase in ("train", "eval"):
+        for game in games:
+            game.phase = phase
+        first, second = (_play_checked(g, seed=7) for g in games)
+        assert len(first) == len(second)
+        for i, (a, b) in enumerate(zip(first, second, strict=True)):
+            _assert_same(a, b, f"{phase} move {i}")
+    for game in games:
+        game.close()
