@@ -31,21 +31,34 @@ class ZeroAdversary:
 
 
 class _NoisePolicy:
-    """Draws a raw perturbation each call and encodes it into the adversary's action."""
+    """Draws raw perturbations and encodes them into the adversary's action.
+
+    Samples are drawn and encoded in blocks of `BLOCK` (one generator call per block), which is
+    as reproducible as drawing one at a time and keeps the per-step cost off the hot path.
+    """
+
+    BLOCK = 256
 
     def __init__(self, info: AgentInfo, draw: Any) -> None:
         self.info = info
         self.draw = draw
         self.rng = np.random.default_rng()
+        self._block = np.empty((0, *info.action_space.shape), dtype=np.float32)
+        self._i = 0
 
     def reset(self, seed: int | None = None) -> None:
-        """Reseed (when a seed is given)."""
+        """Reseed (when a seed is given), dropping samples drawn from the old seed."""
         if seed is not None:
             self.rng = np.random.default_rng(seed)
+            self._i = len(self._block)
 
     def act(self, observation: Any) -> np.ndarray:
-        """One encoded noise sample."""
-        return self.info.encode(self.draw(self.rng))
+        """The next encoded noise sample."""
+        if self._i >= len(self._block):
+            self._block = self.info.encode(self.draw(self.rng, self.BLOCK))
+            self._i = 0
+        self._i += 1
+        return self._block[self._i - 1]
 
 
 def _vector(value: float | Sequence[float], size: int, name: str) -> np.ndarray:
@@ -83,7 +96,7 @@ class GaussianAdversary:
         """A seeded Gaussian sampler for `info`'s disruptor."""
         n = int(np.prod(info.action_space.shape))
         mean, std = _vector(self.mean, n, "mean"), _vector(self.std, n, "std")
-        return _NoisePolicy(info, lambda rng: rng.normal(mean, std))
+        return _NoisePolicy(info, lambda rng, k: rng.normal(mean, std, size=(k, n)))
 
 
 @dataclass(frozen=True)
@@ -114,4 +127,4 @@ class UniformAdversary:
         """A seeded uniform sampler for `info`'s disruptor."""
         n = int(np.prod(info.action_space.shape))
         low, high = _vector(self.low, n, "low"), _vector(self.high, n, "high")
-        return _NoisePolicy(info, lambda rng: rng.uniform(low, high))
+        return _NoisePolicy(info, lambda rng, k: rng.uniform(low, high, size=(k, n)))

@@ -133,6 +133,19 @@ class Game(ParallelEnv):
         return AgentInfo(agent, self.observation_space(agent), self.action_space(agent),
                          self.disruptors.get(agent))
 
+    def set_observation_scale(self, target: str, std: Any) -> int:
+        """Give normalized-space observation disruptors on `target` its normalizer's std.
+
+        ATLA budgets live in the protagonist's normalized observation space; the training loop
+        calls this with the (frozen) running std. Returns how many disruptors were updated.
+        """
+        count = 0
+        for d in self._sensing + self._stale:
+            if getattr(d.spec, "space", "raw") == "normalized" and target in d.targets:  # type: ignore[attr-defined]
+                d.set_scale(target, std)  # type: ignore[attr-defined]
+                count += 1
+        return count
+
     # -- PettingZoo surface -----------------------------------------------------------------
     def observation_space(self, agent: str) -> spaces.Space:
         """Protagonists: the task's observation space; adversaries: the true-state space."""

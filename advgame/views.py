@@ -117,6 +117,22 @@ class SingleAgentView(gym.Env):
         game = self.game
         return {a: self.policies[a].act(game.observe(a)) for a in game.next_movers if a != self.agent}
 
+    def set_policies(self, policies: Mapping[str, Any]) -> None:
+        """Swap some embedded policies (the training loop does this between phases).
+
+        Works through `VecEnv.env_method` in worker processes; specs are built there.
+        """
+        if self.agent in policies:
+            raise ConfigError(f"{self.agent!r} is the learner of this view; do not pass a policy for it.")
+        probe = {self.agent: _Placeholder(), **{a: p for a, p in self.policies.items()}, **policies}
+        built = build_policies(self.game, probe)
+        for a in policies:
+            self.policies[a] = built[a]
+
+    def set_observation_scale(self, target: str, std: Any) -> None:
+        """Set the normalizer std of `target` for normalized-space observation budgets."""
+        self.game.set_observation_scale(target, std)
+
     def render(self) -> Any:
         """Render the game's task base."""
         return self.game.render()

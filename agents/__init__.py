@@ -5,3 +5,7 @@ if __name__ != "advgame.agents":  # pragma: no cover - packaging guard
         "This folder is installed as `advgame.agents`; import it under that name "
         "(pip install -e . from the repository root), not as the bare `agents`."
     )
+
+from advgame.agents.sb3 import LEARNERS, PPOConfig, SACConfig, TD3Config
+
+__all__ = ["LEARNERS", "PPOConfig", "SACConfig", "TD3Config"]

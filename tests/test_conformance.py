@@ -42,7 +42,9 @@ def _cycles(sid: str) -> int:
 def _assert_same(a: Any, b: Any, where: str) -> None:
     """Exact, recursive equality of two step outputs (dicts, arrays, scalars)."""
     if isinstance(a, dict):
-        assert isinstance(b, dict) and a.keys() == b.keys(), f"{where}: keys {a.keys()} != {b.keys()}"
+        assert isinstance(b, dict) and a.keys() == b.keys(), (
+            f"{where}: keys {a.keys()} != {b.keys()}"
+        )
         for k in a:
             _assert_same(a[k], b[k], f"{where}[{k!r}]")
     elif isinstance(a, (tuple, list)):
@@ -75,6 +77,9 @@ def test_pettingzoo_parallel_api(sid: str, preset: str) -> None:
 
 @pytest.mark.parametrize(("sid", "preset"), CASES)
 def test_pettingzoo_parallel_seed(sid: str, preset: str) -> None:
+    # Build one game first: importing Box2D's SWIG module emits DeprecationWarnings (third-party,
+    # at import time only), and turning those into errors mid-import crashes the interpreter.
+    advgame.make(sid, preset=preset).close()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         parallel_seed_test(lambda: advgame.make(sid, preset=preset), num_cycles=_cycles(sid))

@@ -106,6 +106,8 @@ class ActionRuntime(AdditiveDisruptor):
         """Raw units -> adversary action: an offset (additive) or the adversary's own action."""
         if self.mode == "additive":
             return super().encode(value)
+        if np.ndim(value) == 2:
+            return np.stack([self.encode(row) for row in value])
         out, i = [], 0
         flat = np.asarray(value, dtype=np.float64).reshape(-1)
         for t in self.targets:

@@ -195,9 +195,13 @@ class Disruptor(abc.ABC):
         """The adversary action that produces perturbation `value` (raw units), before clipping.
 
         Noise and schedule adversaries think in raw units (a state offset, a gravity value);
-        this maps them into the adversary's action space.
+        this maps them into the adversary's action space. A batch ``(B, size)`` of values
+        encodes row by row.
         """
-        return np.asarray(value, dtype=np.float32).reshape(self.shape)
+        return np.asarray(value, dtype=np.float32).reshape(self._batch_shape(value))
+
+    def _batch_shape(self, value: Any) -> tuple[int, ...]:
+        return (-1, *self.shape) if np.ndim(value) == 2 else self.shape
 
     def reset(self) -> None:
         """Forget episode state (clip counts, held perturbations) at a game reset."""
@@ -239,7 +243,7 @@ class AdditiveDisruptor(Disruptor):
 
     def encode(self, value: Any) -> np.ndarray:
         """Perturbation in raw units -> normalized adversary action."""
-        v = np.asarray(value, dtype=np.float64).reshape(self.shape)
+        v = np.asarray(value, dtype=np.float64).reshape(self._batch_shape(value))
         if not self.bounded:
             return v.astype(np.float32)
         with np.errstate(divide="ignore", invalid="ignore"):

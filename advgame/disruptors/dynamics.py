@@ -240,7 +240,7 @@ class DynamicsRuntime(Disruptor):
 
     def encode(self, value: Any) -> np.ndarray:
         """Parameter values (absolute, or factors if relative) -> adversary action."""
-        v = np.asarray(value, dtype=np.float64).reshape(self.shape)
+        v = np.asarray(value, dtype=np.float64).reshape(self._batch_shape(value))
         span = self.high - self.low
         with np.errstate(divide="ignore", invalid="ignore"):
             u = np.where(span > 0, 2.0 * (v - self.low) / np.where(span > 0, span, 1.0) - 1.0, 0.0)

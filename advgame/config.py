@@ -1,0 +1,130 @@
+"""Config dataclasses as files and command lines: field docs, JSON round trips, CLI overrides.
+
+Configs are frozen dataclasses with a docstring under each field (read here with `ast`, so the
+docstring is the single source of the ``--help`` text). Values are JSON-friendly scalars,
+strings, lists and dicts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import inspect
+import json
+import textwrap
+import typing
+from pathlib import Path
+from typing import Any, TypeVar
+
+from advgame.errors import ConfigError, did_you_mean
+
+__all__ = ["add_arguments", "field_docs", "from_dict", "load_json", "override", "save_json", "to_dict"]
+
+T = TypeVar("T")
+
+
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring written under each field of dataclass `cls` (and its bases)."""
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        try:
+            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
+        except (OSError, TypeError):
+            continue
+        body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
+        for node, nxt in zip(body, body[1:], strict=False):
+            if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+                    and isinstance(nxt, ast.Expr) and isinstance(nxt.value, ast.Constant)
+                    and isinstance(nxt.value.value, str)):
+                docs[node.target.id] = " ".join(nxt.value.value.split())
+    return docs
+
+
+def to_dict(cfg: Any) -> dict[str, Any]:
+    """A config as a plain dict (nested dataclasses included)."""
+    return dataclasses.asdict(cfg)
+
+
+def from_dict(cls: type[T], data: dict[str, Any]) -> T:
+    """Build config `cls` from a dict, naming unknown keys with a suggestion."""
+    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    for key in data:
+        if key not in names:
+            raise ConfigError(f"Unknown {cls.__name__} option {key!r}.{did_you_mean(key, names)} "
+                              f"Options: {sorted(names)}.")
+    hints = typing.get_type_hints(cls)
+    values = {k: _coerce(hints[k], v) for k, v in data.items()}
+    return cls(**values)
+
+
+def _coerce(hint: Any, value: Any) -> Any:
+    origin = typing.get_origin(hint)
+    if origin is tuple and isinstance(value, list):
+        return tuple(value)
+    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        if value is not None and len(args) == 1:
+            return _coerce(args[0], value)
+    return value
+
+
+def save_json(cfg: Any, path: str | Path) -> None:
+    """Write a config as JSON."""
+    Path(path).write_text(json.dumps(to_dict(cfg), indent=2, sort_keys=True) + "\n")
+
+
+def load_json(cls: type[T], path: str | Path) -> T:
+    """Read a config from JSON written by `save_json` (or by hand)."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"Cannot read config {path}: {exc}") from exc
+    return from_dict(cls, data)
+
+
+def override(cfg: T, assignments: list[str]) -> T:
+    """Apply ``key=value`` overrides (values parsed as JSON when they parse, else strings)."""
+    data = to_dict(cfg)
+    for item in assignments:
+        key, sep, raw = item.partition("=")
+        if not sep:
+            raise ConfigError(f"Override {item!r} is not key=value (e.g. iterations=5).")
+        try:
+            data[key.strip()] = json.loads(raw)
+        except json.JSONDecodeError:
+            data[key.strip()] = raw
+    return from_dict(type(cfg), data)
+
+
+def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
+    """One ``--field-name`` option per scalar field of `cls`, with its docstring as help."""
+    docs = field_docs(cls)
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        kind = _scalar(hint)
+        if kind is None:
+            continue
+        default = f.default if f.default is not dataclasses.MISSING else None
+        flag = "--" + f.name.replace("_", "-")
+        help_text = f"{docs.get(f.name, '')} (default: {default})"
+        if kind is bool:
+            parser.add_argument(flag, dest=f.name, action=argparse.BooleanOptionalAction,
+                                default=None, help=help_text)
+        else:
+            parser.add_argument(flag, dest=f.name, type=kind, default=None, help=help_text,
+                                choices=typing.get_args(hint) if typing.get_origin(hint) is typing.Literal else None)
+
+
+def _scalar(hint: Any) -> type | None:
+    if hint in (int, float, str, bool):
+        return hint  # type: ignore[no-any-return]
+    if typing.get_origin(hint) is typing.Literal:
+        return type(typing.get_args(hint)[0])  # type: ignore[no-any-return]
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    if len(args) == 1 and args[0] in (int, float, str):
+        return args[0]  # type: ignore[no-any-return]
+    return None

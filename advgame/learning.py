@@ -1,0 +1,175 @@
+"""One learning agent of the alternation loop: its views, normalizer and SB3 model.
+
+A `Side` owns a VecEnv of `SingleAgentView`s of one agent (protagonist or adversary), an
+optional `VecNormalize`, and the Stable-Baselines3 model that learns on them. The loop swaps
+the frozen opponents inside the views between phases (`Side.set_policies`), trains for a
+number of steps (`Side.learn`), and checkpoints (`Side.save`, `Side.load`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from advgame.checkpoint import SB3Checkpoint
+
+__all__ = ["EpisodeStats", "Side"]
+
+log = logging.getLogger(__name__)
+
+
+def _make_venv(env_fns: Sequence[Callable[[], Any]], vec_env: str) -> Any:
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    if vec_env == "subproc" and len(env_fns) > 1:
+        return SubprocVecEnv(list(env_fns), start_method="forkserver")
+    return DummyVecEnv(list(env_fns))
+
+
+class EpisodeStats:
+    """An SB3 callback factory recording true episode returns and driving a progress bar."""
+
+    def __init__(self, progress: Any = None) -> None:
+        self.progress = progress
+        self.true_returns: list[float] = []
+        self.clipped = 0
+
+    def callback(self) -> Any:
+        """A fresh SB3 `BaseCallback` feeding this recorder."""
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        stats = self
+
+        class _Callback(BaseCallback):
+            def _init_callback(self) -> None:
+                self._acc = np.zeros(self.training_env.num_envs)
+
+            def _on_step(self) -> bool:
+                infos, dones = self.locals["infos"], self.locals["dones"]
+                for i, info in enumerate(infos):
+                    self._acc[i] += info.get("true_reward", 0.0)
+                    stats.clipped += int(info.get("clipped", 0))
+                    if dones[i]:
+                        stats.true_returns.append(float(self._acc[i]))
+                        self._acc[i] = 0.0
+                if stats.progress is not None:
+                    stats.progress.update(len(infos))
+                return True
+
+        return _Callback()
+
+    def pop(self) -> tuple[float, int, int]:
+        """Mean true return of finished episodes, episode count and clips since the last pop."""
+        values, clipped = self.true_returns, self.clipped
+        self.true_returns, self.clipped = [], 0
+        return (float(np.mean(values)) if values else float("nan")), len(values), clipped
+
+
+class Side:
+    """One learning agent: views of `agent`, an optional normalizer, and its SB3 model.
+
+    Args:
+        agent: the agent id it learns for.
+        learner: a learner config (`advgame.agents.PPOConfig`, ...).
+        env_fns: thunks building its views (`advgame.views.view_factory`).
+        seed: seeds the model and the VecEnv.
+        total_steps: planned steps over the run (for learning-rate decay).
+        normalize: wrap the views in `VecNormalize` (observations and rewards).
+        tensorboard_log: a folder for SB3's TensorBoard scalars, or None.
+        vec_env: ``"dummy"`` (in-process; fastest for cheap envs on few cores) or ``"subproc"``.
+    """
+
+    def __init__(self, agent: str, learner: Any, env_fns: Sequence[Callable[[], Any]], seed: int,
+                 total_steps: int, normalize: bool = True, tensorboard_log: str | None = None,
+                 vec_env: str = "dummy", model: Any = None, venv: Any = None) -> None:
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        self.agent = agent
+        self.learner = learner
+        if venv is None:
+            venv = _make_venv(env_fns, vec_env)
+            if normalize:
+                venv = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=learner.gamma)
+        self.venv = venv
+        self.normalized = isinstance(venv, VecNormalize)
+        self.model = model or learner.make_model(venv, seed, total_steps, tensorboard_log)
+        if model is None:
+            self.venv.seed(seed)
+
+    @property
+    def steps(self) -> int:
+        """Environment steps this side has trained on."""
+        return int(self.model.num_timesteps)
+
+    def learn(self, steps: int, stats: EpisodeStats | None = None) -> None:
+        """Train for (at least) `steps` more environment steps, normalizer updating."""
+        decay = self.model.learning_rate
+        if callable(decay) and hasattr(decay, "offset"):  # a run-long LinearDecay
+            decay.offset, decay.span = self.steps, steps
+        if self.normalized:
+            self.venv.training = True
+        callback = stats.callback() if stats is not None else None
+        self.model.learn(steps, reset_num_timesteps=False, callback=callback, progress_bar=False,
+                         tb_log_name=self.agent)
+
+    def freeze(self) -> None:
+        """Stop updating the observation normalizer (while the other side trains)."""
+        if self.normalized:
+            self.venv.training = False
+
+    def set_policies(self, policies: Mapping[str, Any], index: int | None = None) -> None:
+        """Replace embedded opponent policies in every view (or view `index`)."""
+        self.venv.env_method("set_policies", dict(policies), indices=index)
+
+    def set_observation_scale(self, target: str, std: np.ndarray) -> None:
+        """Pass a normalizer std to the views' normalized-space observation disruptors."""
+        self.venv.env_method("set_observation_scale", target, std)
+
+    def observation_std(self) -> np.ndarray | None:
+        """The current std of this side's observation normalizer (None if unnormalized)."""
+        if not self.normalized:
+            return None
+        rms = self.venv.obs_rms
+        return np.sqrt(rms.var + self.venv.epsilon)
+
+    def save(self, folder: Path, deterministic: bool = True) -> SB3Checkpoint:
+        """Write model, normalizer stats and state; return the spec that replays the policy."""
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{self.agent}.zip"
+        self.model.save(path)
+        normalizer = None
+        if self.normalized:
+            normalizer = folder / f"{self.agent}_obs_norm.npz"
+            np.savez(normalizer, mean=self.venv.obs_rms.mean, var=self.venv.obs_rms.var)
+            self.venv.save(folder / f"{self.agent}_vecnormalize.pkl")
+        if hasattr(self.model, "replay_buffer"):
+            self.model.save_replay_buffer(folder / f"{self.agent}_replay.pkl")
+        return SB3Checkpoint(str(path), self.learner.algo, str(normalizer) if normalizer else None,
+                             deterministic=deterministic)
+
+    @classmethod
+    def load(cls, folder: Path, agent: str, learner: Any, env_fns: Sequence[Callable[[], Any]],
+             vec_env: str = "dummy", tensorboard_log: str | None = None) -> Side:
+        """Rebuild a side saved by `save` (to resume a run)."""
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        from advgame.checkpoint import _algo_class
+
+        venv = _make_venv(env_fns, vec_env)
+        stats = folder / f"{agent}_vecnormalize.pkl"
+        if stats.exists():
+            venv = VecNormalize.load(str(stats), venv)
+        model = _algo_class(learner.algo).load(folder / f"{agent}.zip", env=venv, device="cpu",
+                                               tensorboard_log=tensorboard_log)
+        replay = folder / f"{agent}_replay.pkl"
+        if replay.exists():
+            model.load_replay_buffer(replay)
+        return cls(agent, learner, env_fns, 0, 0, model=model, venv=venv)
+
+    def close(self) -> None:
+        """Close the views."""
+        self.venv.close()

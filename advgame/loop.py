@@ -1,0 +1,217 @@
+"""Driving a `Trainer` through its iterations: building sides, committing, resuming, logging."""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from advgame.learning import EpisodeStats, Side
+from advgame.policy import ConstantPolicy
+from advgame.population import Member, Population
+from advgame.registry import load, make
+from advgame.rollout import filler_action, rollout
+from advgame.training import (
+    _ZERO,
+    Trainer,
+    append_progress,
+    commit_folder,
+    learner_config,
+    now,
+    write_state,
+)
+from advgame.views import view_factory
+
+__all__ = ["Run"]
+
+log = logging.getLogger(__name__)
+
+
+class Run:
+    """Executes a trainer's iterations in its run directory, committing each one atomically."""
+
+    def __init__(self, trainer: Trainer) -> None:
+        self.t = trainer
+        self.cfg = trainer.cfg
+        self.dir = trainer.dir
+        self.ckpt = self.dir / "checkpoints"
+        self.prot_cfg = learner_config(self.cfg.protagonist_algo, self.cfg.protagonist_hparams)
+        self.adv_cfg = learner_config(self.cfg.adversary_algo, self.cfg.adversary_hparams)
+
+    def execute(self, fresh: bool) -> Path:
+        """Run every remaining iteration; return the run directory."""
+        import torch
+
+        torch.set_num_threads(1)
+        start = self._fresh() if fresh else self._restore()
+        cfg = self.cfg
+        per_iter = cfg.protagonist_steps + cfg.adversary_steps * len(self.t.learned)
+        total = per_iter * cfg.iterations + cfg.warmup_steps
+        done = per_iter * (start - 1) + (cfg.warmup_steps if start > 1 else 0)
+        bar = _progress_bar(total, done, self.cfg.scenario, self.t.progress)
+        writer = _tensorboard(self.dir / "tb" / "loop")
+        try:
+            for it in range(start, cfg.iterations + 1):
+                row = self._iteration(it, bar)
+                for key, value in row.items():
+                    if key != "iteration" and isinstance(value, (int, float)) and np.isfinite(value):
+                        if writer is not None:
+                            writer.add_scalar(f"loop/{key}", value, it)
+                log.info("iteration %d/%d: %s", it, cfg.iterations, row)
+        finally:
+            bar.close()
+            if writer:
+                writer.close()
+            for side in self.t.sides.values():
+                side.close()
+        return self.dir
+
+    # -- one iteration ----------------------------------------------------------------------
+    def _iteration(self, it: int, bar: Any) -> dict[str, Any]:
+        t, cfg = self.t, self.cfg
+        t.iteration = it
+        partial = self.ckpt / f"iter_{it:04d}.partial"
+        if partial.exists():
+            shutil.rmtree(partial)
+        prot_stats, adv_stats = EpisodeStats(bar), EpisodeStats(bar)
+        start = now()
+        if it == 1 and cfg.warmup_steps:
+            self._warmup(prot_stats)
+        t.update_protagonists(prot_stats)
+        prot = t.sides[t.protagonist]
+        frozen = prot.save(partial, deterministic=False)
+        t.update_adversaries(adv_stats, frozen)
+        t.snapshot(partial)
+        final = commit_folder(partial)
+        elapsed = now() - start
+        p_ret, p_eps, _ = prot_stats.pop()
+        a_ret, a_eps, clips = adv_stats.pop()
+        steps = cfg.protagonist_steps + cfg.adversary_steps * len(t.learned)
+        row: dict[str, Any] = {
+            "iteration": it, "protagonist_steps": prot.steps,
+            "adversary_steps": sum(t.sides[a].steps for a in t.learned),
+            "protagonist_phase_true_return": p_ret, "protagonist_phase_episodes": p_eps,
+            "adversary_phase_true_return": a_ret, "adversary_phase_episodes": a_eps,
+            "adversary_clipped": clips, "fps": steps / max(elapsed, 1e-9), "wall_s": elapsed,
+            **self._quick_eval(final, it),
+        }
+        t.population.save(self.dir / "population.json")
+        append_progress(self.dir / "progress.csv", row, keep_below=it)
+        write_state(self.dir, {"iteration": it, "rng": t.rng.bit_generator.state,
+                               "checkpoint": str(final.relative_to(self.dir))})
+        return row
+
+    def _warmup(self, stats: EpisodeStats) -> None:
+        prot = self.t.sides[self.t.protagonist]
+        prot.set_policies({a: load(_ZERO)() for a in self.t.learned})
+        prot.learn(self.cfg.warmup_steps, stats)
+
+    def _quick_eval(self, folder: Path, it: int) -> dict[str, float]:
+        """Mean true return of the deterministic protagonist, nominal and attacked (full budget)."""
+        if not self.cfg.eval_episodes:
+            return {}
+        t = self.t
+        game = make(self.cfg.scenario, preset=self.cfg.preset, phase="eval")
+        ckpt = self._protagonist_spec(folder)
+        seed = self.cfg.seed + 100_000 + it
+        nominal = rollout(game, {t.protagonist: ckpt, **{a: load(_ZERO)() for a in game.adversaries}},
+                          seed=seed, episodes=self.cfg.eval_episodes)
+        attackers = {**t.fixed, **{a: t.population.of(a)[-1].spec for a in t.learned}}
+        attacked = rollout(game, {t.protagonist: ckpt, **attackers}, seed=seed,
+                           episodes=self.cfg.eval_episodes)
+        game.close()
+        return {"eval_nominal_return": float(np.mean([r.true_return for r in nominal])),
+                "eval_attacked_return": float(np.mean([r.true_return for r in attacked]))}
+
+    def _protagonist_spec(self, folder: Path) -> Any:
+        from advgame.checkpoint import SB3Checkpoint
+
+        agent = self.t.protagonist
+        norm = folder / f"{agent}_obs_norm.npz"
+        return SB3Checkpoint(str(folder / f"{agent}.zip"), self.prot_cfg.algo,
+                             str(norm) if norm.exists() else None, deterministic=True)
+
+    # -- building ---------------------------------------------------------------------------
+    def _env_fns(self, agent: str, policies: dict[str, Any]) -> list[Any]:
+        kwargs = {**self.t.train_kwargs, "phase": "train"}
+        return [view_factory(self.cfg.scenario, agent, policies, **kwargs) for _ in range(self.cfg.n_envs)]
+
+    def _build_sides(self, folder: Path | None) -> None:
+        t, cfg = self.t, self.cfg
+        game = make(cfg.scenario, preset=cfg.preset)
+        placeholder = ConstantPolicy(filler_action(game.action_space(t.protagonist)))
+        game.close()
+        specs = [(t.protagonist, self.prot_cfg, dict(t.fixed), cfg.protagonist_steps + cfg.warmup_steps)]
+        for a in t.learned:
+            others = {k: v for k, v in t.fixed.items() if k != a}
+            specs.append((a, self.adv_cfg, {t.protagonist: placeholder, **others}, cfg.adversary_steps))
+        tb = str(self.dir / "tb")
+        for k, (agent, learner, policies, per_iter) in enumerate(specs):
+            fns = self._env_fns(agent, policies)
+            if folder is None:
+                t.sides[agent] = Side(agent, learner, fns, cfg.seed + k, per_iter * cfg.iterations,
+                                      normalize=cfg.normalize, tensorboard_log=tb, vec_env=cfg.vec_env)
+            else:
+                t.sides[agent] = Side.load(folder, agent, learner, fns, cfg.vec_env, tensorboard_log=tb)
+
+    def _fresh(self) -> int:
+        t = self.t
+        self._build_sides(None)
+        folder = self.ckpt / "iter_0000.partial"
+        if folder.exists():
+            shutil.rmtree(folder)
+        for a in t.learned:
+            t.population.add(Member(f"{a}:noop", "adversary", a, load(_ZERO)(), 0, learned=False))
+            spec = t.sides[a].save(folder)
+            final = str(folder).replace(".partial", "")
+            t.population.add(Member(f"{a}@0", "adversary", a, _rebase(spec, str(folder), final), 0))
+        commit_folder(folder)
+        t.population.save(self.dir / "population.json")
+        return 1
+
+    def _restore(self) -> int:
+        t = self.t
+        state = json.loads((self.dir / "state.json").read_text())
+        t.population = Population.load(self.dir / "population.json")
+        t.population.members = [m for m in t.population if m.iteration <= state["iteration"]]
+        t.rng.bit_generator.state = state["rng"]
+        self._build_sides(self.dir / state["checkpoint"])
+        log.info("resuming %s after iteration %d", self.dir, state["iteration"])
+        return int(state["iteration"]) + 1
+
+
+def _rebase(spec: Any, old: str, new: str) -> Any:
+    from dataclasses import replace
+
+    norm = spec.normalizer.replace(old, new) if spec.normalizer else None
+    return replace(spec, path=spec.path.replace(old, new), normalizer=norm)
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        """Nothing to show."""
+
+    def close(self) -> None:
+        """Nothing to close."""
+
+
+def _progress_bar(total: int, done: int, label: str, show: bool) -> Any:
+    if not show:
+        return _NoBar()
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, initial=done, desc=f"train {label}", unit="step", smoothing=0.1,
+                mininterval=1.0)
+
+
+def _tensorboard(folder: Path) -> Any:
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:  # tensorboard is a dependency, but the loop must not die for a logger
+        log.warning("tensorboard is not importable; loop scalars go to progress.csv only")
+        return None
+    return SummaryWriter(str(folder))

@@ -1,0 +1,131 @@
+"""Populations of policies: checkpointed protagonists and adversaries with metadata, on disk.
+
+A member is any policy *spec* (an SB3 checkpoint, a noise or schedule adversary, ...) plus
+who it plays and where it came from. Specs are stored as ``{"type": "module:Class",
+"fields": {...}}`` so a population file can be read back in any process (and by hand).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from advgame.errors import ConfigError
+from advgame.registry import load
+
+__all__ = ["SAMPLING", "Member", "Population", "spec_from_dict", "spec_to_dict"]
+
+SAMPLING = ("latest", "uniform", "fictitious")
+
+
+def spec_to_dict(spec: Any) -> dict[str, Any]:
+    """A dataclass policy spec as a JSON-friendly dict."""
+    if not dataclasses.is_dataclass(spec) or isinstance(spec, type):
+        raise ConfigError(f"Only dataclass policy specs can be stored in a population, got {spec!r}.")
+    cls = type(spec)
+    return {"type": f"{cls.__module__}:{cls.__qualname__}", "fields": dataclasses.asdict(spec)}
+
+
+def spec_from_dict(data: dict[str, Any]) -> Any:
+    """Rebuild a spec written by `spec_to_dict`."""
+    cls = load(data["type"])
+    hints = {f.name: f for f in dataclasses.fields(cls)}
+    fields = {k: tuple(v) if isinstance(v, list) and k in hints else v for k, v in data["fields"].items()}
+    return cls(**fields)
+
+
+@dataclass(frozen=True)
+class Member:
+    """One policy of a population."""
+
+    id: str
+    """Unique id, e.g. ``"observation_adversary@3"``."""
+    side: str
+    """``"protagonist"`` or ``"adversary"``."""
+    agent: str
+    """The agent id it plays."""
+    spec: Any
+    """The policy spec (``build(info) -> Policy``)."""
+    iteration: int = -1
+    """Training iteration it was saved at (-1: not from training)."""
+    learned: bool = True
+    """Whether it is a trained snapshot (fictitious play samples only these)."""
+    meta: dict[str, Any] = field(default_factory=dict)
+    """Free-form metadata (scenario, seed, returns at save time)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"id": self.id, "side": self.side, "agent": self.agent, "iteration": self.iteration,
+                "learned": self.learned, "meta": self.meta, "spec": spec_to_dict(self.spec)}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Member:
+        """Inverse of `to_dict`."""
+        return cls(data["id"], data["side"], data["agent"], spec_from_dict(data["spec"]),
+                   data.get("iteration", -1), data.get("learned", True), data.get("meta", {}))
+
+
+class Population:
+    """An ordered collection of members, saved as one JSON file.
+
+    Example:
+        >>> from advgame.adversaries import ZeroAdversary
+        >>> pop = Population()
+        >>> pop.add(Member("zero", "adversary", "observation_adversary", ZeroAdversary(), learned=False))
+        >>> [m.id for m in pop.of("observation_adversary")]
+        ['zero']
+    """
+
+    def __init__(self, members: list[Member] | None = None) -> None:
+        self.members: list[Member] = list(members or [])
+
+    def __iter__(self) -> Iterator[Member]:
+        return iter(self.members)
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+    def add(self, member: Member) -> None:
+        """Append a member (ids must be unique)."""
+        if any(m.id == member.id for m in self.members):
+            raise ConfigError(f"The population already has a member {member.id!r}.")
+        self.members.append(member)
+
+    def of(self, agent: str, learned_only: bool = False) -> list[Member]:
+        """Members playing `agent`, oldest first."""
+        return [m for m in self.members if m.agent == agent and (m.learned or not learned_only)]
+
+    def sample(self, agent: str, how: str, rng: np.random.Generator) -> Member:
+        """Draw an opponent for `agent`: the ``latest`` member, ``uniform`` over all members, or
+        ``fictitious`` play (uniform over trained snapshots only)."""
+        if how not in SAMPLING:
+            raise ConfigError(f"sampling must be one of {SAMPLING}, got {how!r}.")
+        pool = self.of(agent, learned_only=how == "fictitious") or self.of(agent)
+        if not pool:
+            raise ConfigError(f"The population has no member for {agent!r}.")
+        if how == "latest":
+            return pool[-1]
+        return pool[int(rng.integers(len(pool)))]
+
+    def save(self, path: str | Path) -> None:
+        """Write atomically (a crash leaves the old file or the new one, never half of one)."""
+        path = Path(path)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        tmp.write_text(json.dumps([m.to_dict() for m in self.members], indent=2) + "\n")
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> Population:
+        """Read a population file."""
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ConfigError(f"Cannot read population {path}: {exc}") from exc
+        return cls([Member.from_dict(d) for d in data])

@@ -1,0 +1,178 @@
+"""Stable-Baselines3 learners with the paper's hyper-parameters as presets.
+
+Each config is a frozen dataclass; `make_model` builds the SB3 model on a VecEnv of
+single-agent views. The same configs train adversaries (PPO, SAC) in the adversary phase.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from advgame.errors import ConfigError
+
+__all__ = ["LEARNERS", "LinearDecay", "PPOConfig", "SACConfig", "TD3Config"]
+
+
+class LinearDecay:
+    """Learning rate decaying linearly to 0 over a whole alternating run.
+
+    SB3 restarts its progress counter at every ``learn()`` call; the training loop sets
+    `offset` (steps this learner did before the call) and `span` (steps in the call) so the
+    decay follows the run's total steps instead.
+    """
+
+    def __init__(self, initial: float, total: int) -> None:
+        self.initial = initial
+        self.total = max(int(total), 1)
+        self.offset = 0
+        self.span = self.total
+
+    def __call__(self, progress_remaining: float) -> float:
+        done = self.offset + (1.0 - progress_remaining) * self.span
+        return self.initial * max(1.0 - done / self.total, 0.0)
+
+
+def _check_positive(cfg: Any, names: tuple[str, ...]) -> None:
+    for name in names:
+        value = getattr(cfg, name)
+        if not value > 0:
+            raise ConfigError(f"{type(cfg).__name__}.{name} must be > 0, got {value!r}.")
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO with the paper's table (PPO/MAPPO/IPPO hyper-parameters)."""
+
+    algo: ClassVar[str] = "ppo"
+    learning_rate: float = 3e-4
+    """Adam step size."""
+    lr_decay: bool = True
+    """Decay the learning rate linearly to 0 over the run (paper: lr decay True)."""
+    gamma: float = 0.99
+    """Discount factor."""
+    gae_lambda: float = 0.95
+    """GAE λ."""
+    clip_range: float = 0.2
+    """PPO ratio clip ε."""
+    net_arch: tuple[int, ...] = (64, 64)
+    """Hidden layer sizes of the policy and value networks."""
+    n_steps: int = 2048
+    """Steps per environment per rollout (paper: 2048 steps per collect)."""
+    n_epochs: int = 10
+    """Optimisation epochs per rollout (paper: repeat per collect 10)."""
+    batch_size: int = 64
+    """Minibatch size."""
+    vf_coef: float = 0.25
+    """Value loss coefficient."""
+    ent_coef: float = 0.0
+    """Entropy bonus coefficient."""
+    max_grad_norm: float = 0.5
+    """Gradient clipping norm."""
+
+    def __post_init__(self) -> None:
+        _check_positive(self, ("learning_rate", "n_steps", "n_epochs", "batch_size"))
+
+    def make_model(self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None) -> Any:
+        """Build an SB3 PPO on `env` (a VecEnv)."""
+        from stable_baselines3 import PPO
+
+        lr: Any = LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
+        return PPO("MlpPolicy", env, learning_rate=lr, n_steps=self.n_steps, batch_size=self.batch_size,
+                   n_epochs=self.n_epochs, gamma=self.gamma, gae_lambda=self.gae_lambda,
+                   clip_range=self.clip_range, ent_coef=self.ent_coef, vf_coef=self.vf_coef,
+                   max_grad_norm=self.max_grad_norm, policy_kwargs={"net_arch": list(self.net_arch)},
+                   seed=seed, device="cpu", verbose=0, tensorboard_log=tensorboard_log)
+
+
+@dataclass(frozen=True)
+class SACConfig:
+    """SAC with the paper's table (fixed temperature α = 0.2, [64, 64], lr 1e-3)."""
+
+    algo: ClassVar[str] = "sac"
+    learning_rate: float = 1e-3
+    """Actor and critic step size."""
+    lr_decay: bool = False
+    """Decay the learning rate linearly to 0 over the run."""
+    gamma: float = 0.99
+    """Discount factor."""
+    tau: float = 0.005
+    """Target network update rate."""
+    ent_coef: float = 0.2
+    """Entropy temperature α (fixed: the paper's auto alpha is False)."""
+    net_arch: tuple[int, ...] = (64, 64)
+    """Hidden layer sizes."""
+    buffer_size: int = 1_000_000
+    """Replay buffer size (SB3's default; the paper's 4096 is its collector buffer)."""
+    learning_starts: int = 10_000
+    """Random steps before learning (paper: start time step 10000)."""
+    batch_size: int = 64
+    """Minibatch size."""
+    train_freq: int = 1
+    """Environment steps between updates."""
+    gradient_steps: int = 1
+    """Updates per training call (paper: update per step 1)."""
+
+    def __post_init__(self) -> None:
+        _check_positive(self, ("learning_rate", "buffer_size", "batch_size", "train_freq"))
+
+    def make_model(self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None) -> Any:
+        """Build an SB3 SAC on `env`."""
+        from stable_baselines3 import SAC
+
+        lr: Any = LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
+        return SAC("MlpPolicy", env, learning_rate=lr, buffer_size=self.buffer_size,
+                   learning_starts=self.learning_starts, batch_size=self.batch_size, tau=self.tau,
+                   gamma=self.gamma, train_freq=self.train_freq, gradient_steps=self.gradient_steps,
+                   ent_coef=self.ent_coef, policy_kwargs={"net_arch": list(self.net_arch)},
+                   seed=seed, device="cpu", verbose=0, tensorboard_log=tensorboard_log)
+
+
+@dataclass(frozen=True)
+class TD3Config:
+    """TD3 (SB3 defaults, with Gaussian exploration noise σ = 0.1)."""
+
+    algo: ClassVar[str] = "td3"
+    learning_rate: float = 1e-3
+    """Actor and critic step size."""
+    lr_decay: bool = False
+    """Decay the learning rate linearly to 0 over the run."""
+    gamma: float = 0.99
+    """Discount factor."""
+    tau: float = 0.005
+    """Target network update rate."""
+    net_arch: tuple[int, ...] = (256, 256)
+    """Hidden layer sizes."""
+    buffer_size: int = 1_000_000
+    """Replay buffer size."""
+    learning_starts: int = 10_000
+    """Random steps before learning."""
+    batch_size: int = 256
+    """Minibatch size."""
+    action_noise: float = 0.1
+    """Std of the Gaussian exploration noise, as a fraction of the action range."""
+    policy_delay: int = 2
+    """Critic updates per actor update."""
+
+    def __post_init__(self) -> None:
+        _check_positive(self, ("learning_rate", "buffer_size", "batch_size", "policy_delay"))
+
+    def make_model(self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None) -> Any:
+        """Build an SB3 TD3 on `env`."""
+        import numpy as np
+        from stable_baselines3 import TD3
+        from stable_baselines3.common.noise import NormalActionNoise
+
+        n = env.action_space.shape[-1]
+        half = (env.action_space.high - env.action_space.low) / 2.0
+        noise = NormalActionNoise(np.zeros(n), self.action_noise * half * np.ones(n))
+        lr: Any = LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
+        return TD3("MlpPolicy", env, learning_rate=lr, buffer_size=self.buffer_size,
+                   learning_starts=self.learning_starts, batch_size=self.batch_size, tau=self.tau,
+                   gamma=self.gamma, policy_delay=self.policy_delay, action_noise=noise,
+                   policy_kwargs={"net_arch": list(self.net_arch)}, seed=seed, device="cpu",
+                   verbose=0, tensorboard_log=tensorboard_log)
+
+
+LEARNERS: dict[str, type] = {"ppo": PPOConfig, "sac": SACConfig, "td3": TD3Config}
+"""Learner configs by algorithm name."""

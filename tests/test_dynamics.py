@@ -1,0 +1,456 @@
+"""Dynamics and force disruptors on real MuJoCo tasks: they change the physics, and nothing leaks.
+
+For each dynamics parameter kind (mass, gravity, wind, friction, damping, gear, length):
+
+* a shifted value really changes the simulated trajectory compared with the nominal model, from
+  the same seeded state under the same protagonist actions;
+* a zero-width interval at the nominal value is the identity: the game plays exactly the plain
+  Gymnasium trajectory;
+* ``game.reset()`` restores the nominal model exactly (design invariant 4), unless the schedule
+  says the shift persists.
+
+Then the schedules (persist, per episode), the force disruptor's ``xfrc_applied`` and the
+appendix's sinusoidal gravity shift on Ant-v5.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import advgame
+from advgame.adversaries import SinusoidAdversary
+from advgame.disruptors import DynamicsDisruptor, ForceDisruptor, Param
+from advgame.rollout import rollout
+from advgame.schedule import Schedule
+
+P = "protagonist"
+DYN = "dynamics_adversary"
+FORCE = "force_adversary"
+
+# Hopper-v5 observation layout: qpos[1:] (rootz, rooty, 3 hinges), then qvel (vx, vz, ...).
+VX, VZ = 5, 6
+
+
+def model_snapshot(sim) -> dict[str, np.ndarray]:
+    """Every model array a dynamics disruptor may touch (and a few it must not)."""
+    m = sim.model
+    return {
+        "body_mass": m.body_mass.copy(),
+        "body_inertia": m.body_inertia.copy(),
+        "body_pos": m.body_pos.copy(),
+        "gravity": m.opt.gravity.copy(),
+        "wind": m.opt.wind.copy(),
+        "density": np.array(m.opt.density),
+        "viscosity": np.array(m.opt.viscosity),
+        "geom_friction": m.geom_friction.copy(),
+        "geom_size": m.geom_size.copy(),
+        "geom_pos": m.geom_pos.copy(),
+        "dof_damping": m.dof_damping.copy(),
+        "actuator_gear": m.actuator_gear.copy(),
+    }
+
+
+def changed_keys(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> set[str]:
+    return {k for k in a if a[k].shape != b[k].shape or not np.array_equal(a[k], b[k])}
+
+
+@dataclass(frozen=True)
+class Case:
+    """One parameter kind: a shift with its interval end, and the zero-width nominal interval."""
+
+    env_id: str
+    shift: Param
+    end: float  # adversary action selecting an end of the shift's interval
+    nominal: Param  # low == high == nominal value
+    steps: int  # act moves after which the states are compared
+    touches: frozenset[str]  # model arrays the shift must change
+    check: Callable[[Any, dict[str, np.ndarray]], None]  # the live model holds the shifted value
+
+
+def _torso(sim) -> int:
+    return sim.body_id("torso")
+
+
+def _check_mass(sim, nom):
+    t = _torso(sim)
+    assert sim.model.body_mass[t] == 3.0 * nom["body_mass"][t]
+    np.testing.assert_allclose(sim.model.body_inertia[t], 3.0 * nom["body_inertia"][t])
+
+
+def _check_gravity(sim, nom):
+    assert np.array_equal(sim.model.opt.gravity, [0.0, 0.0, -19.62])
+
+
+def _check_wind(sim, nom):
+    assert np.array_equal(sim.model.opt.wind, [10.0, 0.0, 0.0])
+    assert sim.model.opt.density == 1.2  # the Param's air density: wind needs a medium
+
+
+def _check_friction(sim, nom):
+    assert np.all(sim.model.geom_friction[:, 0] == 0.05)
+
+
+def _check_damping(sim, nom):
+    assert np.array_equal(sim.model.dof_damping, 10.0 * nom["dof_damping"])
+    assert np.any(nom["dof_damping"] > 0)
+
+
+def _check_gear(sim, nom):
+    assert np.array_equal(sim.model.actuator_gear[:, 0], 1.5 * nom["actuator_gear"][:, 0])
+
+
+def _check_length(full: float, nominal_full: float):
+    def check(sim, nom):
+        geom = sim.model.body_geomadr[_torso(sim)]
+        assert sim.model.geom_size[geom, 1] == pytest.approx(full / 2, rel=1e-12)
+        # The capsule was rebuilt, so its mass follows its length (a longer capsule is heavier).
+        t = _torso(sim)
+        assert (sim.model.body_mass[t] > nom["body_mass"][t]) == (full > nominal_full)
+    return check
+
+
+CASES = {
+    "mass": Case("Hopper-v5", Param("mass", 0.5, 3.0, names=("torso",), relative=True), 1.0,
+                 Param("mass", 1.0, 1.0, names=("torso",), relative=True), 1,
+                 frozenset({"body_mass", "body_inertia"}), _check_mass),
+    "gravity": Case("Hopper-v5", Param("gravity", 9.81, 19.62), 1.0,
+                    Param("gravity", 9.81, 9.81), 1, frozenset({"gravity"}), _check_gravity),
+    "wind": Case("Hopper-v5", Param("wind", 0.0, 10.0), 1.0, Param("wind", 0.0, 0.0), 1,
+                 frozenset({"wind", "density"}), _check_wind),
+    # Friction acts only through contacts; Hopper's foot first touches the floor ~8 steps in.
+    "friction": Case("Hopper-v5", Param("friction", 0.05, 1.0), -1.0,
+                     Param("friction", 1.0, 1.0, relative=True), 15,
+                     frozenset({"geom_friction"}), _check_friction),
+    "damping": Case("Hopper-v5", Param("damping", 1.0, 10.0, relative=True), 1.0,
+                    Param("damping", 1.0, 1.0, relative=True), 1,
+                    frozenset({"dof_damping"}), _check_damping),
+    "gear": Case("Hopper-v5", Param("gear", 0.5, 1.5, relative=True), 1.0,
+                 Param("gear", 1.0, 1.0, relative=True), 1,
+                 frozenset({"actuator_gear"}), _check_gear),
+    "length-hopper": Case("Hopper-v5", Param("length", 0.3, 0.5, names=("torso",)), 1.0,
+                          Param("length", 0.4, 0.4, names=("torso",)), 1,
+                          frozenset({"geom_size", "body_mass", "body_inertia"}),
+                          _check_length(0.5, 0.4)),
+    "length-walker": Case("Walker2d-v5", Param("length", 0.2, 0.6, names=("torso",)), -1.0,
+                          Param("length", 0.4, 0.4, names=("torso",)), 1,
+                          frozenset({"geom_size", "body_mass", "body_inertia"}),
+                          _check_length(0.2, 0.4)),
+}
+
+
+def make_game(env_id: str, param: Param, schedule: Schedule | None = None):
+    spec = DynamicsDisruptor(params=[param], schedule=schedule or Schedule())
+    return advgame.make(env_id, disruptors=[spec])
+
+
+def protagonist_actions(game, n: int, seed: int, scale: float = 1.0) -> list[np.ndarray]:
+    space = game.action_space(P)
+    rng = np.random.default_rng(seed)
+    return [(scale * rng.uniform(space.low, space.high)).astype(space.dtype) for _ in range(n)]
+
+
+def play(game, seed: int, actions: list[np.ndarray], adversary: float,
+         on_step: Callable[[Any], None] | None = None) -> list[np.ndarray]:
+    """Reset with `seed` and play the protagonist actions; return the observations after each."""
+    game.reset(seed=seed)
+    out = []
+    adv = np.full(game.action_space(DYN).shape, adversary, dtype=np.float32)
+    for a in actions:
+        assert game.next_movers == {P, DYN}
+        obs, _, term, trunc, _ = game.step({P: a, DYN: adv})
+        out.append(np.array(obs[P]))
+        if on_step is not None:
+            on_step(game)
+        if term[P] or trunc[P]:
+            break
+    return out
+
+
+def play_gym(env_id: str, seed: int, actions: list[np.ndarray]) -> list[np.ndarray]:
+    env = gym.make(env_id, disable_env_checker=True)
+    try:
+        env.reset(seed=seed)
+        out = []
+        for a in actions:
+            obs, _, term, trunc, _ = env.step(a)
+            out.append(np.array(obs))
+            if term or trunc:
+                break
+        return out
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("kind", list(CASES))
+def test_shift_changes_the_next_state(kind):
+    case = CASES[kind]
+    shifted, nominal = make_game(case.env_id, case.shift), make_game(case.env_id, case.nominal)
+    try:
+        nom_model = model_snapshot(shifted.task.sim)
+        # Moderate actions keep the hopper healthy (no early termination) for all steps.
+        actions = protagonist_actions(shifted, case.steps, seed=11, scale=0.3)
+        contacts: list[int] = []
+
+        def watch(game):
+            case.check(game.task.sim, nom_model)
+            contacts.append(game.task.sim.data.ncon)
+
+        obs_shift = play(shifted, 7, actions, case.end, on_step=watch)
+        obs_nom = play(nominal, 7, actions, 0.0)
+        assert len(obs_shift) == len(obs_nom) == case.steps
+        # The earlier states are identical when the parameter cannot act before contact ...
+        if kind == "friction":
+            assert max(contacts) > 0, "the hopper never touched the floor: friction untested"
+            first = contacts.index(next(c for c in contacts if c > 0))
+            for k in range(first):
+                assert np.array_equal(obs_shift[k], obs_nom[k])
+        # ... and the final state is clearly different (MuJoCo is deterministic, so an unused
+        # parameter would give bit-identical states).
+        diff = np.abs(obs_shift[-1] - obs_nom[-1])
+        assert diff.max() > 1e-6, diff
+        if kind == "gravity":  # twice the gravity: the hopper falls faster
+            assert obs_shift[-1][VZ] < obs_nom[-1][VZ]
+        if kind == "wind":  # a +x wind drags the hopper forward
+            assert obs_shift[-1][VX] > obs_nom[-1][VX]
+    finally:
+        shifted.close()
+        nominal.close()
+
+
+@pytest.mark.parametrize("kind", list(CASES))
+def test_zero_width_interval_at_nominal_plays_the_plain_task(kind):
+    """A nominal-valued shift is the identity: the trajectory of the plain Gymnasium env.
+
+    Checked in two consecutive episodes, since MuJoCo keeps model edits across resets. Length
+    changes recompile the model from its XML; the recompiled capsule's half-length (0.2) may
+    differ from the XML's fromto-derived one in the last bit, so lengths get a 1e-9 tolerance.
+    """
+    case = CASES[kind]
+    game = make_game(case.env_id, case.nominal)
+    try:
+        actions = protagonist_actions(game, 25, seed=3)
+        for episode in range(2):
+            seed = 100 + episode
+            got = play(game, seed, actions, 0.0)
+            want = play_gym(case.env_id, seed, actions)
+            assert len(got) == len(want), f"episode {episode}: episode lengths differ"
+            atol = 1e-9 if case.shift.kind == "length" else 0.0
+            for t, (g, w) in enumerate(zip(got, want, strict=True)):
+                np.testing.assert_allclose(g, w, rtol=0, atol=atol,
+                                           err_msg=f"{kind}: episode {episode}, step {t}")
+    finally:
+        game.close()
+
+
+@pytest.mark.parametrize("kind", list(CASES))
+def test_reset_restores_the_nominal_model_exactly(kind):
+    case = CASES[kind]
+    game = make_game(case.env_id, case.shift)
+    try:
+        sim = game.task.sim
+        model0 = sim.model
+        before = model_snapshot(sim)  # before any reset or step
+        game.reset(seed=0)
+        assert not changed_keys(before, model_snapshot(sim))
+        rng = np.random.default_rng(0)
+        for episode, adversary in enumerate([case.end, None, -0.5 * case.end]):
+            game.reset(seed=episode)
+            assert not changed_keys(before, model_snapshot(sim)), f"episode {episode} began shifted"
+            for t in range(4):
+                u = rng.uniform(-1, 1) if adversary is None else adversary
+                game.step({P: np.zeros(game.action_space(P).shape, np.float32),
+                           DYN: np.array([u], dtype=np.float32)})
+                if t == 0:
+                    assert changed_keys(before, model_snapshot(sim)) & case.touches, \
+                        "the shift did not reach the model: this test would prove nothing"
+            game.reset()
+            after = model_snapshot(sim)
+            assert not changed_keys(before, after), changed_keys(before, after)
+            if case.shift.kind == "length":
+                assert sim.model is model0  # the nominal compiled model is back, not a rebuild
+    finally:
+        game.close()
+
+
+@pytest.mark.parametrize(
+    ("param", "key"),
+    [(Param("gravity", 9.81, 19.62), "gravity"),
+     (Param("mass", 1.0, 2.0, relative=True), "body_mass"),
+     (Param("friction", 0.5, 1.5, relative=True), "geom_friction")],
+    ids=["gravity", "mass", "friction"],
+)
+@pytest.mark.parametrize("schedule", [Schedule(persist=True), Schedule.per_episode(persist=True)],
+                         ids=["every-step", "per-episode"])
+def test_persistent_schedule_keeps_the_shift_across_reset(param, key, schedule):
+    game = make_game("Hopper-v5", param, schedule)
+    try:
+        sim = game.task.sim
+        before = model_snapshot(sim)
+        game.reset(seed=0)
+        game.step({P: np.zeros(3, np.float32), DYN: np.ones(1, np.float32)})
+        shifted = model_snapshot(sim)
+        assert key in changed_keys(before, shifted)
+        for seed in (1, 2):
+            game.reset(seed=seed)
+            assert not changed_keys(shifted, model_snapshot(sim)), "a persistent shift was undone"
+    finally:
+        game.close()
+    # The same disruptor without persist restores (the contrast that makes the test meaningful).
+    game = make_game("Hopper-v5", param, Schedule.per_episode())
+    try:
+        game.reset(seed=0)
+        game.step({P: np.zeros(3, np.float32), DYN: np.ones(1, np.float32)})
+        game.reset(seed=1)
+        assert not changed_keys(before, model_snapshot(game.task.sim))
+    finally:
+        game.close()
+
+
+def test_per_episode_schedule_acts_only_at_t0_and_holds_for_the_episode():
+    game = make_game("Hopper-v5", Param("gravity", 9.81, 19.62), Schedule.per_episode())
+    sim = game.task.sim
+    try:
+        for episode, u0 in enumerate([0.5, -0.5, 1.0]):
+            game.reset(seed=episode)
+            assert sim.model.opt.gravity[2] == -9.81  # nominal again at the start of each episode
+            assert DYN in game.next_movers
+            _, _, _, _, infos = game.step({P: np.zeros(3, np.float32), DYN: np.array([u0])})
+            assert infos[DYN]["acted"] is True
+            g0 = 9.81 + (u0 + 1) / 2 * (19.62 - 9.81)
+            assert -sim.model.opt.gravity[2] == pytest.approx(g0, rel=1e-12)
+            for t in range(1, 12):
+                assert game.t == t
+                assert game.next_movers == {P}, f"the adversary was asked to move at t={t}"
+                # Whatever it sends now is ignored: the t=0 value holds for the episode.
+                ignored = np.array([(-1.0) ** t * 0.9])
+                _, _, term, trunc, infos = game.step({P: np.zeros(3, np.float32), DYN: ignored})
+                assert infos[DYN] == {"acted": False, "clipped": 0}
+                assert -sim.model.opt.gravity[2] == pytest.approx(g0, rel=1e-12)
+                assert not (term[P] or trunc[P])
+    finally:
+        game.close()
+
+
+def test_force_writes_xfrc_applied_and_a_skipped_step_clears_it():
+    spec = ForceDisruptor(bodies=("torso",), axes="xz", max_force=20.0, schedule=Schedule.every_n(2))
+    game = advgame.make("Hopper-v5", disruptors=[spec])
+    sim = game.task.sim
+    try:
+        game.reset(seed=0)
+        torso = sim.body_id("torso")
+        zero = np.zeros(3, np.float32)
+        expected = np.zeros_like(sim.data.xfrc_applied)
+        # t=0: active.
+        _, _, _, _, infos = game.step({P: zero, FORCE: np.array([1.0, 0.5])})
+        assert infos[FORCE]["acted"] is True
+        expected[torso, [0, 2]] = [20.0, 10.0]
+        assert np.array_equal(sim.data.xfrc_applied, expected)
+        # t=1: skipped and not held -> the force is removed before the simulator steps.
+        assert FORCE not in game.next_movers
+        _, _, _, _, infos = game.step({P: zero, FORCE: np.array([-1.0, -1.0])})
+        assert infos[FORCE]["acted"] is False
+        assert np.all(sim.data.xfrc_applied == 0.0)
+        # t=2: active again.
+        game.step({P: zero, FORCE: np.array([-0.25, 0.0])})
+        expected[torso, [0, 2]] = [-5.0, 0.0]
+        assert np.array_equal(sim.data.xfrc_applied, expected)
+        # Nothing leaks into the next episode.
+        game.reset(seed=1)
+        assert np.all(sim.data.xfrc_applied == 0.0)
+    finally:
+        game.close()
+
+
+def test_held_force_stays_on_skipped_steps():
+    spec = ForceDisruptor(bodies=("torso",), axes="xz", max_force=20.0,
+                          schedule=Schedule(every=2, hold=True))
+    game = advgame.make("Hopper-v5", disruptors=[spec])
+    sim = game.task.sim
+    try:
+        game.reset(seed=0)
+        torso = sim.body_id("torso")
+        game.step({P: np.zeros(3, np.float32), FORCE: np.array([1.0, 0.5])})
+        game.step({P: np.zeros(3, np.float32), FORCE: np.array([-1.0, -1.0])})  # skipped, held
+        assert np.array_equal(sim.data.xfrc_applied[torso, [0, 2]], [20.0, 10.0])
+    finally:
+        game.close()
+
+
+def test_force_pushes_the_body():
+    """A +x force on the torso accelerates the hopper forward compared with no force."""
+    spec = ForceDisruptor(bodies=("torso",), axes="xz", max_force=50.0)
+    game = advgame.make("Hopper-v5", disruptors=[spec])
+    try:
+        game.reset(seed=4)
+        obs, *_ = game.step({P: np.zeros(3, np.float32), FORCE: np.array([1.0, 0.0])})
+        want = play_gym("Hopper-v5", 4, [np.zeros(3, np.float32)])[0]
+        assert obs[P][VX] > want[VX] + 1e-3
+    finally:
+        game.close()
+
+
+def test_force_survives_a_length_recompile_on_the_same_step():
+    """A length shift recompiles the model on the step; the force of that step must still act."""
+    game = advgame.make("Hopper-v5", disruptors=[
+        ForceDisruptor(bodies=("torso",), axes="xz", max_force=20.0),
+        DynamicsDisruptor(params=[Param("length", 0.3, 0.5, names=("torso",))]),
+    ])
+    sim = game.task.sim
+    try:
+        game.reset(seed=0)
+        torso = sim.body_id("torso")
+        game.step({P: np.zeros(3, np.float32), FORCE: np.array([1.0, 1.0]), DYN: np.array([1.0])})
+        assert sim.model.geom_size[sim.model.body_geomadr[torso], 1] == pytest.approx(0.25)
+        assert np.array_equal(sim.data.xfrc_applied[torso, [0, 2]], [20.0, 20.0])
+    finally:
+        game.close()
+
+
+def test_sinusoid_preset_sets_gravity_per_episode_on_ant():
+    game = advgame.make("Ant-v5", preset="shift-sinusoid", max_episode_steps=6)
+    adversary = game.preset.adversaries[DYN]
+    assert isinstance(adversary, SinusoidAdversary)
+    sim = game.task.sim
+    seen: dict[int, list[tuple[int, float, float, float]]] = {}
+    episode = [-1]
+
+    def protagonist(obs):
+        if game.t == 0:
+            episode[0] += 1
+        m = sim.model
+        seen.setdefault(episode[0], []).append(
+            (game.t, -float(m.opt.gravity[2]), float(m.opt.wind[0]), float(m.opt.density)))
+        return np.zeros(game.action_space(P).shape, dtype=np.float32)
+
+    try:
+        nominal_g = -float(sim.model.opt.gravity[2])
+        n_episodes = 5
+        results = rollout(game, {P: protagonist, DYN: adversary}, seed=0, episodes=n_episodes)
+        assert sorted(seen) == list(range(n_episodes))
+        for i in range(n_episodes):
+            g_i = 14.715 + 4.905 * np.sin(0.5 * i)
+            wind_i = 1.0 + 0.2 * np.sin(0.5 * i)
+            rows = seen[i]
+            t0 = [r for r in rows if r[0] == 0]
+            later = [r for r in rows if r[0] > 0]
+            assert t0 and later
+            # t=0 is seen before the adversary's first move: the nominal model, no leakage.
+            assert t0[0][1] == nominal_g and t0[0][2] == 0.0
+            for _, g, wind, density in later:
+                # The action space is float32: the value is exact to float32 precision.
+                assert g == pytest.approx(g_i, abs=1e-5), (i, g, g_i)
+                assert wind == pytest.approx(wind_i, abs=1e-6)
+                assert density == 1.2
+        # Every value lies inside the preset's intervals, so nothing was clipped.
+        assert all(r.clipped[DYN] == 0 for r in results)
+        # The shift really varies from episode to episode.
+        firsts = [seen[i][1][1] for i in range(n_episodes)]
+        assert len(set(np.round(firsts, 4))) == n_episodes
+    finally:
+        game.close()
