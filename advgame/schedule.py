@@ -98,6 +98,12 @@ class Schedule:
         """Whether the disruptor is live at all in game phase `phase` (``"train"`` or ``"eval"``)."""
         return self.phase == "both" or self.phase == phase
 
+    def exhausted(self, t: int) -> bool:
+        """Whether no step ``>= t`` of this episode can be active (the window has closed)."""
+        if self.once_per_episode and t > self.start:
+            return True
+        return self.stop is not None and t >= self.stop
+
     def is_active(self, t: int, phase: str, rng: np.random.Generator | None) -> bool:
         """Whether step `t` is attacked; draws from `rng` only when `probability` < 1."""
         if not self.in_phase(phase) or t < self.start:

@@ -63,6 +63,7 @@ class SingleAgentView(gym.Env):
         self.action_space = game.action_space(agent)
         self.render_mode = getattr(getattr(game.task, "env", None), "render_mode", None)
         self._protagonist = agent in game.protagonists
+        self._schedule = disruptor.schedule if disruptor is not None else None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         """Reset the game and the embedded policies; play until the learner's first decision."""
@@ -92,6 +93,10 @@ class SingleAgentView(gym.Env):
         self._play(actions, tally)
         while self.game.agents and self.agent not in self.game.next_movers:
             self._play(self._others(), tally)
+        if tally.truncated and self._schedule is not None and self._schedule.exhausted(self.game.t):
+            # The learner had no decision left when the time limit hit: for it the episode
+            # ended with its last decision, so bootstrapping past the limit would be wrong.
+            tally.terminated, tally.truncated = True, False
         return self.game.observe(self.agent), tally.reward, tally.terminated, tally.truncated, tally.info
 
     def _play(self, actions: dict[str, Any], tally: _Tally) -> None:

@@ -1,0 +1,181 @@
+"""The ``advgame`` command: list scenarios, train, resume, evaluate, report, and the demo.
+
+Run ``advgame --help`` or ``advgame COMMAND --help``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from advgame.errors import AdvgameError
+
+__all__ = ["main"]
+
+log = logging.getLogger("advgame")
+
+EPILOG = """examples:
+  advgame list --presets Hopper-v5
+  advgame train --method atla --scenario Hopper-v5 --iterations 5 --run-dir runs/atla
+  advgame train --config runs/atla/config.json --set iterations=20 --run-dir runs/atla20
+  advgame resume runs/atla
+  advgame evaluate runs/ppo runs/atla --out results/hopper --seeds 3
+  advgame report results/hopper
+  advgame demo
+"""
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from advgame.registry import list_scenarios, scenario_spec
+
+    ids = args.ids or list_scenarios(args.family)
+    for sid in ids:
+        spec = scenario_spec(sid)
+        print(f"{sid:28s} {spec.family:8s} {spec.description}")
+        if args.presets:
+            for name, preset in sorted(spec.load_presets().items()):
+                print(f"    {name:24s} {preset.description}")
+    return 0
+
+
+def _train_config(args: argparse.Namespace) -> Any:
+    from advgame.config import from_dict, load_json, override, to_dict
+    from advgame.training import METHODS, TrainConfig
+
+    cfg = load_json(TrainConfig, args.config) if args.config else TrainConfig()
+    data = to_dict(cfg)
+    if args.method:
+        data.update(METHODS[args.method])
+    for name in data:
+        value = getattr(args, name, None)
+        if value is not None:
+            data[name] = value
+    return override(from_dict(TrainConfig, data), args.set or [])
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from advgame.training import train
+
+    cfg = _train_config(args)
+    run_dir = Path(args.run_dir or f"runs/{cfg.scenario}-{args.method or 'custom'}-s{cfg.seed}")
+    train(cfg, run_dir, progress=not args.no_progress)
+    print(f"run written to {run_dir}")
+    return 0
+
+
+def _cmd_resume(args: argparse.Namespace) -> int:
+    from advgame.training import resume
+
+    resume(args.run_dir, progress=not args.no_progress)
+    print(f"run completed in {args.run_dir}")
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from advgame.suite import evaluate_runs
+
+    out = evaluate_runs(args.runs, Path(args.out), seeds=args.seeds, episodes=args.episodes,
+                        workers=args.workers, exploitability_steps=args.exploitability,
+                        checkpoints=args.checkpoint or [], callables=args.callable or [])
+    print(f"report: {out}")
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from advgame.suite import report_folder
+
+    print(f"report: {report_folder(Path(args.folder))}")
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from advgame.suite import demo
+
+    print(f"report: {demo(Path(args.out), quick=args.quick, workers=args.workers)}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``advgame`` (exposed for documentation and tests)."""
+    from advgame.config import add_arguments
+    from advgame.training import METHODS, TrainConfig
+
+    parser = argparse.ArgumentParser(
+        prog="advgame", description="Robust RL as adversarial PettingZoo games.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("list", help="list scenarios (and their presets)")
+    p.add_argument("ids", nargs="*", help="scenario ids (default: all)")
+    p.add_argument("--family", help="only this family (mujoco, box2d, ...)")
+    p.add_argument("--presets", action="store_true", help="also list each scenario's presets")
+    p.set_defaults(func=_cmd_list)
+
+    p = sub.add_parser("train", help="train a protagonist against learned adversaries",
+                       description="Alternate protagonist and adversary training (ATLA/RARL).")
+    p.add_argument("--method", choices=sorted(METHODS), help="start from a named method: "
+                   + "; ".join(f"{k}: {v}" for k, v in METHODS.items()))
+    p.add_argument("--config", help="a config.json to start from (e.g. from another run)")
+    p.add_argument("--run-dir", help="where the run is written (default runs/<scenario>-<method>-s<seed>)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help='override any config field, JSON values: --set protagonist_hparams=\'{"n_steps": 512}\'')
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_arguments(p, TrainConfig)
+    p.set_defaults(func=_cmd_train)
+
+    p = sub.add_parser("resume", help="continue an interrupted run")
+    p.add_argument("run_dir", help="the run directory")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_resume)
+
+    p = sub.add_parser("evaluate", help="evaluate trained protagonists against an adversary population")
+    p.add_argument("runs", nargs="*", help="run directories whose final protagonists (and learned "
+                   "adversaries) join the evaluation")
+    p.add_argument("--checkpoint", action="append", metavar="NAME=PATH[:ALGO]",
+                   help="also evaluate an SB3 checkpoint as a protagonist")
+    p.add_argument("--callable", action="append", metavar="NAME=MODULE:FUNCTION",
+                   help="also evaluate a plain function obs -> action as a protagonist")
+    p.add_argument("--out", required=True, help="output folder (CSV, JSON, plots, report.md)")
+    p.add_argument("--seeds", type=int, default=3, help="evaluation seeds per cell (default 3)")
+    p.add_argument("--episodes", type=int, default=1, help="episodes per seed (default 1)")
+    p.add_argument("--workers", type=int, default=2, help="parallel worker processes (default 2)")
+    p.add_argument("--exploitability", type=int, default=0, metavar="STEPS",
+                   help="train a best-response adversary for STEPS steps per protagonist")
+    p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("report", help="rebuild the report (Markdown + PNG) of an evaluation folder")
+    p.add_argument("folder", help="a folder written by `advgame evaluate` or `advgame demo`")
+    p.set_defaults(func=_cmd_report)
+
+    p = sub.add_parser("demo", help="train PPO and ATLA-PPO briefly, evaluate, write a report")
+    p.add_argument("--out", default="reports/demo", help="output folder (default reports/demo)")
+    p.add_argument("--quick", action="store_true", help="a much shorter run (for smoke tests)")
+    p.add_argument("--workers", type=int, default=2, help="evaluation worker processes")
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``advgame`` command; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.func(args))
+    except AdvgameError as exc:
+        print(f"advgame {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"advgame {args.command}: interrupted; a training run can be continued with "
+              "`advgame resume RUN_DIR`.", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
