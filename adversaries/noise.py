@@ -23,6 +23,7 @@ class ZeroAdversary:
         >>> game = advgame.make("Hopper-v5")
         >>> ZeroAdversary().build(game.agent_info("observation_adversary")).act(None)
         array([0., 0., 0., 0., 0., 0., 0., 0., 0., 0., 0.], dtype=float32)
+
     """
 
     def build(self, info: AgentInfo) -> Policy:
@@ -43,7 +44,7 @@ class _NoisePolicy:
         self.info = info
         self.draw = draw
         self.rng = np.random.default_rng()
-        self._block = np.empty((0, *info.action_space.shape), dtype=np.float32)
+        self._block = np.empty((0, *info.action_shape), dtype=np.float32)
         self._i = 0
 
     def reset(self, seed: int | None = None) -> None:
@@ -81,6 +82,7 @@ class GaussianAdversary:
         >>> pol = GaussianAdversary(std=0.1).build(game.agent_info("observation_adversary"))
         >>> pol.reset(seed=0); pol.act(None).shape
         (11,)
+
     """
 
     mean: float | Sequence[float] = 0.0
@@ -94,7 +96,7 @@ class GaussianAdversary:
 
     def build(self, info: AgentInfo) -> Policy:
         """A seeded Gaussian sampler for `info`'s disruptor."""
-        n = int(np.prod(info.action_space.shape))
+        n = info.action_size
         mean, std = _vector(self.mean, n, "mean"), _vector(self.std, n, "std")
         return _NoisePolicy(info, lambda rng, k: rng.normal(mean, std, size=(k, n)))
 
@@ -112,6 +114,7 @@ class UniformAdversary:
         ...     game.agent_info("dynamics_adversary"))
         >>> pol.reset(seed=0); pol.act(None).shape
         (2,)
+
     """
 
     low: float | Sequence[float] = -0.1
@@ -121,10 +124,12 @@ class UniformAdversary:
 
     def __post_init__(self) -> None:
         if np.any(np.asarray(self.low, dtype=np.float64) > np.asarray(self.high, dtype=np.float64)):
-            raise ConfigError(f"UniformAdversary needs low <= high, got {self.low!r} > {self.high!r}.")
+            raise ConfigError(
+                f"UniformAdversary needs low <= high, got {self.low!r} > {self.high!r}."
+            )
 
     def build(self, info: AgentInfo) -> Policy:
         """A seeded uniform sampler for `info`'s disruptor."""
-        n = int(np.prod(info.action_space.shape))
+        n = info.action_size
         low, high = _vector(self.low, n, "low"), _vector(self.high, n, "high")
         return _NoisePolicy(info, lambda rng, k: rng.uniform(low, high, size=(k, n)))

@@ -26,6 +26,7 @@ class ConstantAdversary:
         >>> game = advgame.make("Ant-v5", preset="shift-deterministic")
         >>> ConstantAdversary((14.715, 1.0)).build(game.agent_info("dynamics_adversary")).act(None)
         array([ 0.  , -0.6], dtype=float32)
+
     """
 
     value: float | Sequence[float] = 0.0
@@ -33,15 +34,21 @@ class ConstantAdversary:
 
     def build(self, info: AgentInfo) -> Policy:
         """A constant policy sending the encoded value."""
-        n = int(np.prod(info.action_space.shape))
+        n = info.action_size
         return ConstantPolicy(info.encode(np.broadcast_to(np.asarray(self.value, float), (n,))))
 
 
 class _Sinusoid:
     """Counts episodes (resets) and plays ``base + amplitude * sin(frequency * i + phase)``."""
 
-    def __init__(self, info: AgentInfo, base: np.ndarray, amp: np.ndarray, freq: np.ndarray,
-                 phase: np.ndarray) -> None:
+    def __init__(
+        self,
+        info: AgentInfo,
+        base: np.ndarray,
+        amp: np.ndarray,
+        freq: np.ndarray,
+        phase: np.ndarray,
+    ) -> None:
         self.info, self.base, self.amp, self.freq, self.phase = info, base, amp, freq, phase
         self.episode = -1
         self.action = info.encode(base)
@@ -53,7 +60,7 @@ class _Sinusoid:
         self.action = self.info.encode(value)
 
     def act(self, observation: Any) -> np.ndarray:
-        """This episode's value."""
+        """The value of the current episode."""
         return self.action
 
 
@@ -72,6 +79,7 @@ class SinusoidAdversary:
         ...     game.agent_info("dynamics_adversary"))
         >>> pol.reset(); pol.act(None)
         array([ 0. , -0.6], dtype=float32)
+
     """
 
     base: float | Sequence[float] = 0.0
@@ -85,7 +93,7 @@ class SinusoidAdversary:
 
     def build(self, info: AgentInfo) -> Policy:
         """A policy that advances one episode per reset."""
-        n = int(np.prod(info.action_space.shape))
+        n = info.action_size
         vals = []
         for name in ("base", "amplitude", "frequency", "phase"):
             arr = np.asarray(getattr(self, name), dtype=np.float64)

@@ -47,11 +47,18 @@ class SB3Policy:
         obs_mean, obs_var: the frozen normalizer statistics, or None if unnormalized.
         deterministic: act with the distribution's mode instead of sampling.
         clip_obs: the normalizer's clip range (SB3 `VecNormalize` default 10).
+
     """
 
-    def __init__(self, model: Any, obs_mean: np.ndarray | None = None,
-                 obs_var: np.ndarray | None = None, deterministic: bool = True,
-                 clip_obs: float = 10.0, epsilon: float = 1e-8) -> None:
+    def __init__(
+        self,
+        model: Any,
+        obs_mean: np.ndarray | None = None,
+        obs_var: np.ndarray | None = None,
+        deterministic: bool = True,
+        clip_obs: float = 10.0,
+        epsilon: float = 1e-8,
+    ) -> None:
         self.model = model
         self.deterministic = deterministic
         self.mean = obs_mean
@@ -70,7 +77,9 @@ class SB3Policy:
         """The policy's action for one raw observation."""
         obs = np.asarray(observation, dtype=np.float32)
         if self.mean is not None and self.std is not None:
-            obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs).astype(np.float32)
+            obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs).astype(
+                np.float32
+            )
         action, _ = self.model.predict(obs, deterministic=self.deterministic)
         return action
 
@@ -81,6 +90,7 @@ class SB3Checkpoint:
 
     Example:
         ``SB3Checkpoint("runs/demo/checkpoints/iter_0004/protagonist.zip", algo="ppo")``
+
     """
 
     path: str

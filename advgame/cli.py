@@ -78,9 +78,16 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from advgame.suite import evaluate_runs
 
-    out = evaluate_runs(args.runs, Path(args.out), seeds=args.seeds, episodes=args.episodes,
-                        workers=args.workers, exploitability_steps=args.exploitability,
-                        checkpoints=args.checkpoint or [], callables=args.callable or [])
+    out = evaluate_runs(
+        args.runs,
+        Path(args.out),
+        seeds=args.seeds,
+        episodes=args.episodes,
+        workers=args.workers,
+        exploitability_steps=args.exploitability,
+        checkpoints=args.checkpoint or [],
+        callables=args.callable or [],
+    )
     print(f"report: {out}")
     return 0
 
@@ -105,8 +112,11 @@ def build_parser() -> argparse.ArgumentParser:
     from advgame.training import METHODS, TrainConfig
 
     parser = argparse.ArgumentParser(
-        prog="advgame", description="Robust RL as adversarial PettingZoo games.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+        prog="advgame",
+        description="Robust RL as adversarial PettingZoo games.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -116,14 +126,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--presets", action="store_true", help="also list each scenario's presets")
     p.set_defaults(func=_cmd_list)
 
-    p = sub.add_parser("train", help="train a protagonist against learned adversaries",
-                       description="Alternate protagonist and adversary training (ATLA/RARL).")
-    p.add_argument("--method", choices=sorted(METHODS), help="start from a named method: "
-                   + "; ".join(f"{k}: {v}" for k, v in METHODS.items()))
+    p = sub.add_parser(
+        "train",
+        help="train a protagonist against learned adversaries",
+        description="Alternate protagonist and adversary training (ATLA/RARL).",
+    )
+    p.add_argument(
+        "--method",
+        choices=sorted(METHODS),
+        help="start from a named method: " + "; ".join(f"{k}: {v}" for k, v in METHODS.items()),
+    )
     p.add_argument("--config", help="a config.json to start from (e.g. from another run)")
-    p.add_argument("--run-dir", help="where the run is written (default runs/<scenario>-<method>-s<seed>)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help='override any config field, JSON values: --set protagonist_hparams=\'{"n_steps": 512}\'')
+    p.add_argument(
+        "--run-dir", help="where the run is written (default runs/<scenario>-<method>-s<seed>)"
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override any config field, JSON values: --set protagonist_hparams='{\"n_steps\": 512}'",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_arguments(p, TrainConfig)
     p.set_defaults(func=_cmd_train)
@@ -133,19 +155,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_resume)
 
-    p = sub.add_parser("evaluate", help="evaluate trained protagonists against an adversary population")
-    p.add_argument("runs", nargs="*", help="run directories whose final protagonists (and learned "
-                   "adversaries) join the evaluation")
-    p.add_argument("--checkpoint", action="append", metavar="NAME=PATH[:ALGO]",
-                   help="also evaluate an SB3 checkpoint as a protagonist")
-    p.add_argument("--callable", action="append", metavar="NAME=MODULE:FUNCTION",
-                   help="also evaluate a plain function obs -> action as a protagonist")
+    p = sub.add_parser(
+        "evaluate", help="evaluate trained protagonists against an adversary population"
+    )
+    p.add_argument(
+        "runs",
+        nargs="*",
+        help="run directories whose final protagonists (and learned "
+        "adversaries) join the evaluation",
+    )
+    p.add_argument(
+        "--checkpoint",
+        action="append",
+        metavar="NAME=PATH[:ALGO]",
+        help="also evaluate an SB3 checkpoint as a protagonist",
+    )
+    p.add_argument(
+        "--callable",
+        action="append",
+        metavar="NAME=MODULE:FUNCTION",
+        help="also evaluate a plain function obs -> action as a protagonist",
+    )
     p.add_argument("--out", required=True, help="output folder (CSV, JSON, plots, report.md)")
     p.add_argument("--seeds", type=int, default=3, help="evaluation seeds per cell (default 3)")
     p.add_argument("--episodes", type=int, default=1, help="episodes per seed (default 1)")
     p.add_argument("--workers", type=int, default=2, help="parallel worker processes (default 2)")
-    p.add_argument("--exploitability", type=int, default=0, metavar="STEPS",
-                   help="train a best-response adversary for STEPS steps per protagonist")
+    p.add_argument(
+        "--exploitability",
+        type=int,
+        default=0,
+        metavar="STEPS",
+        help="train a best-response adversary for STEPS steps per protagonist",
+    )
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser("report", help="rebuild the report (Markdown + PNG) of an evaluation folder")
@@ -164,16 +205,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``advgame`` command; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
     try:
         return int(args.func(args))
     except AdvgameError as exc:
         print(f"advgame {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"advgame {args.command}: interrupted; a training run can be continued with "
-              "`advgame resume RUN_DIR`.", file=sys.stderr)
+        print(
+            f"advgame {args.command}: interrupted; a training run can be continued with "
+            "`advgame resume RUN_DIR`.",
+            file=sys.stderr,
+        )
         return 130
 
 

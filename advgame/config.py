@@ -11,6 +11,7 @@ import argparse
 import ast
 import dataclasses
 import inspect
+import itertools
 import json
 import textwrap
 import typing
@@ -19,7 +20,15 @@ from typing import Any, TypeVar
 
 from advgame.errors import ConfigError, did_you_mean
 
-__all__ = ["add_arguments", "field_docs", "from_dict", "load_json", "override", "save_json", "to_dict"]
+__all__ = [
+    "add_arguments",
+    "field_docs",
+    "from_dict",
+    "load_json",
+    "override",
+    "save_json",
+    "to_dict",
+]
 
 T = TypeVar("T")
 
@@ -35,10 +44,14 @@ def field_docs(cls: type) -> dict[str, str]:
         except (OSError, TypeError):
             continue
         body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
-        for node, nxt in zip(body, body[1:], strict=False):
-            if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
-                    and isinstance(nxt, ast.Expr) and isinstance(nxt.value, ast.Constant)
-                    and isinstance(nxt.value.value, str)):
+        for node, nxt in itertools.pairwise(body):
+            if (
+                isinstance(node, ast.AnnAssign)
+                and isinstance(node.target, ast.Name)
+                and isinstance(nxt, ast.Expr)
+                and isinstance(nxt.value, ast.Constant)
+                and isinstance(nxt.value.value, str)
+            ):
                 docs[node.target.id] = " ".join(nxt.value.value.split())
     return docs
 
@@ -53,8 +66,10 @@ def from_dict(cls: type[T], data: dict[str, Any]) -> T:
     names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     for key in data:
         if key not in names:
-            raise ConfigError(f"Unknown {cls.__name__} option {key!r}.{did_you_mean(key, names)} "
-                              f"Options: {sorted(names)}.")
+            raise ConfigError(
+                f"Unknown {cls.__name__} option {key!r}.{did_you_mean(key, names)} "
+                f"Options: {sorted(names)}."
+            )
     hints = typing.get_type_hints(cls)
     values = {k: _coerce(hints[k], v) for k, v in data.items()}
     return cls(**values)
@@ -112,19 +127,32 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
         flag = "--" + f.name.replace("_", "-")
         help_text = f"{docs.get(f.name, '')} (default: {default})"
         if kind is bool:
-            parser.add_argument(flag, dest=f.name, action=argparse.BooleanOptionalAction,
-                                default=None, help=help_text)
+            parser.add_argument(
+                flag,
+                dest=f.name,
+                action=argparse.BooleanOptionalAction,
+                default=None,
+                help=help_text,
+            )
         else:
-            parser.add_argument(flag, dest=f.name, type=kind, default=None, help=help_text,
-                                choices=typing.get_args(hint) if typing.get_origin(hint) is typing.Literal else None)
+            parser.add_argument(
+                flag,
+                dest=f.name,
+                type=kind,
+                default=None,
+                help=help_text,
+                choices=typing.get_args(hint)
+                if typing.get_origin(hint) is typing.Literal
+                else None,
+            )
 
 
 def _scalar(hint: Any) -> type | None:
     if hint in (int, float, str, bool):
-        return hint  # type: ignore[no-any-return]
+        return hint
     if typing.get_origin(hint) is typing.Literal:
-        return type(typing.get_args(hint)[0])  # type: ignore[no-any-return]
+        return type(typing.get_args(hint)[0])
     args = [a for a in typing.get_args(hint) if a is not type(None)]
     if len(args) == 1 and args[0] in (int, float, str):
-        return args[0]  # type: ignore[no-any-return]
+        return args[0]
     return None

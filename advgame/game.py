@@ -24,7 +24,7 @@ import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
@@ -81,10 +81,21 @@ class Game(ParallelEnv):
         scenario_id: the registry id, for `repr` and reports.
     """
 
-    metadata = {"name": "advgame_v0", "is_parallelizable": True, "render_modes": ["rgb_array", "human"]}
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "advgame_v0",
+        "is_parallelizable": True,
+        "render_modes": ["rgb_array", "human"],
+    }
 
-    def __init__(self, task: TaskBase, disruptors: Sequence[DisruptorSpec] = (), *,
-                 cost_weight: float = 0.0, phase: str = "train", scenario_id: str = "") -> None:
+    def __init__(
+        self,
+        task: TaskBase,
+        disruptors: Sequence[DisruptorSpec] = (),
+        *,
+        cost_weight: float = 0.0,
+        phase: str = "train",
+        scenario_id: str = "",
+    ) -> None:
         self.task = task
         self.scenario_id = scenario_id
         self.preset: Any = None
@@ -106,13 +117,28 @@ class Game(ParallelEnv):
         self.possible_agents = [*self.protagonists, *self.adversaries]
         self.agents: list[str] = []
         self._all = frozenset(self.possible_agents)
-        self._obs_spaces = {**task.observation_spaces, **dict.fromkeys(self.adversaries, task.state_space)}
-        self._act_spaces = {**task.action_spaces, **{a: d.action_space for a, d in self.disruptors.items()}}
-        by_hook: dict[str, list[Disruptor]] = {"observation": [], "action": [], "reward": [], "environment": []}
+        self._obs_spaces = {
+            **task.observation_spaces,
+            **dict.fromkeys(self.adversaries, task.state_space),
+        }
+        self._act_spaces = {
+            **task.action_spaces,
+            **{a: d.action_space for a, d in self.disruptors.items()},
+        }
+        by_hook: dict[str, list[Disruptor]] = {
+            "observation": [],
+            "action": [],
+            "reward": [],
+            "environment": [],
+        }
         for d in self.disruptors.values():
             by_hook[d.hook].append(d)
-        self._sensing = [d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "sense"]
-        self._stale = [d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "stale"]
+        self._sensing = [
+            d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "sense"
+        ]
+        self._stale = [
+            d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "stale"
+        ]
         self._action_ds, self._reward_ds = by_hook["action"], by_hook["reward"]
         self._env_ds = by_hook["environment"]
         self._act_ds = [*self._env_ds, *self._action_ds, *self._reward_ds, *self._stale]
@@ -130,8 +156,12 @@ class Game(ParallelEnv):
 
     def agent_info(self, agent: str) -> AgentInfo:
         """Spaces (and disruptor) of `agent`, what a `PolicySpec` needs to build its policy."""
-        return AgentInfo(agent, self.observation_space(agent), self.action_space(agent),
-                         self.disruptors.get(agent))
+        return AgentInfo(
+            agent,
+            self.observation_space(agent),
+            self.action_space(agent),
+            self.disruptors.get(agent),
+        )
 
     def set_observation_scale(self, target: str, std: Any) -> int:
         """Give normalized-space observation disruptors on `target` its normalizer's std.
@@ -156,7 +186,7 @@ class Game(ParallelEnv):
         return self._act_spaces[self._known(agent)]
 
     @property
-    def state_space(self) -> spaces.Space:  # type: ignore[override]
+    def state_space(self) -> spaces.Space:
         """The space of `state()`, the true global state."""
         return self.task.state_space
 
@@ -216,7 +246,9 @@ class Game(ParallelEnv):
             raise ActionError("The episode is over (no live agents); call reset() before play().")
         if not self.next_movers.issubset(actions):
             missing = sorted(self.next_movers - set(actions))
-            raise ActionError(f"This {self.move} move needs actions for {missing} (game.next_movers).")
+            raise ActionError(
+                f"This {self.move} move needs actions for {missing} (game.next_movers)."
+            )
         if self.move == SENSE:
             return self._sense(actions)
         return self._act(actions)
@@ -291,8 +323,14 @@ class Game(ParallelEnv):
             assert m.rewards is not None and m.costs is not None and m.info is not None
             rewards = {**m.rewards, **dict.fromkeys(self.adversaries, -m.payoff)}
             for p in self.protagonists:
-                infos[p] = {**m.info, "acted": True, "true_reward": m.reward, "true_cost": m.cost,
-                            "cost": m.costs[p], "payoff": m.payoff}
+                infos[p] = {
+                    **m.info,
+                    "acted": True,
+                    "true_reward": m.reward,
+                    "true_cost": m.cost,
+                    "cost": m.costs[p],
+                    "payoff": m.payoff,
+                }
         for a in self.adversaries:
             infos[a] = {"acted": a in clipped, "clipped": clipped.get(a, 0)}
         terms = dict.fromkeys(self.possible_agents, m.terminated)
@@ -336,7 +374,9 @@ class Game(ParallelEnv):
             self.next_movers = self._act_movers()
 
     def _act_movers(self) -> frozenset[str]:
-        return frozenset([*self.protagonists, *(d.agent for d in self._act_ds if self._active[d.agent])])
+        return frozenset(
+            [*self.protagonists, *(d.agent for d in self._act_ds if self._active[d.agent])]
+        )
 
     def _effective(self, d: Disruptor, used: dict[str, np.ndarray]) -> np.ndarray | None:
         u = used.get(d.agent)
@@ -347,15 +387,23 @@ class Game(ParallelEnv):
     def _protagonist_action(self, agent: str, action: Any) -> Any:
         space = self._act_spaces[agent]
         if isinstance(space, spaces.Discrete):
-            ok = np.ndim(action) == 0 and float(action) == int(action) and space.contains(np.int64(action))
+            ok = (
+                np.ndim(action) == 0
+                and float(action) == int(action)
+                and space.contains(np.int64(action))
+            )
             if not ok:
-                raise ActionError(f"Action for {agent!r} must be an int in {space}, got {action!r}.")
+                raise ActionError(
+                    f"Action for {agent!r} must be an int in {space}, got {action!r}."
+                )
             return np.int64(action)
         a = np.asarray(action)
         if a.dtype != space.dtype:
             a = a.astype(space.dtype)
         if a.shape != space.shape:
-            raise ActionError(f"Action for {agent!r} has shape {a.shape}; expected {space.shape} ({space}).")
+            raise ActionError(
+                f"Action for {agent!r} has shape {a.shape}; expected {space.shape} ({space})."
+            )
         if not math.isfinite(a.dot(a)) and not np.isfinite(a).all():  # dot: one cheap pass
             raise ActionError(f"Action for {agent!r} contains NaN or inf: {a}.")
         return a
@@ -397,5 +445,7 @@ class Game(ParallelEnv):
         return repr(self)
 
     def __repr__(self) -> str:
-        return (f"Game({self.scenario_id or type(self.task).__name__!r}, protagonists="
-                f"{list(self.protagonists)}, adversaries={list(self.adversaries)}, phase={self.phase!r})")
+        return (
+            f"Game({self.scenario_id or type(self.task).__name__!r}, protagonists="
+            f"{list(self.protagonists)}, adversaries={list(self.adversaries)}, phase={self.phase!r})"
+        )

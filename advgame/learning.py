@@ -81,11 +81,22 @@ class Side:
         normalize: wrap the views in `VecNormalize` (observations and rewards).
         tensorboard_log: a folder for SB3's TensorBoard scalars, or None.
         vec_env: ``"dummy"`` (in-process; fastest for cheap envs on few cores) or ``"subproc"``.
+
     """
 
-    def __init__(self, agent: str, learner: Any, env_fns: Sequence[Callable[[], Any]], seed: int,
-                 total_steps: int, normalize: bool = True, tensorboard_log: str | None = None,
-                 vec_env: str = "dummy", model: Any = None, venv: Any = None) -> None:
+    def __init__(
+        self,
+        agent: str,
+        learner: Any,
+        env_fns: Sequence[Callable[[], Any]],
+        seed: int,
+        total_steps: int,
+        normalize: bool = True,
+        tensorboard_log: str | None = None,
+        vec_env: str = "dummy",
+        model: Any = None,
+        venv: Any = None,
+    ) -> None:
         from stable_baselines3.common.vec_env import VecNormalize
 
         self.agent = agent
@@ -113,8 +124,13 @@ class Side:
         if self.normalized:
             self.venv.training = True
         callback = stats.callback() if stats is not None else None
-        self.model.learn(steps, reset_num_timesteps=False, callback=callback, progress_bar=False,
-                         tb_log_name=self.agent)
+        self.model.learn(
+            steps,
+            reset_num_timesteps=False,
+            callback=callback,
+            progress_bar=False,
+            tb_log_name=self.agent,
+        )
 
     def freeze(self) -> None:
         """Stop updating the observation normalizer (while the other side trains)."""
@@ -148,12 +164,23 @@ class Side:
             self.venv.save(folder / f"{self.agent}_vecnormalize.pkl")
         if hasattr(self.model, "replay_buffer"):
             self.model.save_replay_buffer(folder / f"{self.agent}_replay.pkl")
-        return SB3Checkpoint(str(path), self.learner.algo, str(normalizer) if normalizer else None,
-                             deterministic=deterministic)
+        return SB3Checkpoint(
+            str(path),
+            self.learner.algo,
+            str(normalizer) if normalizer else None,
+            deterministic=deterministic,
+        )
 
     @classmethod
-    def load(cls, folder: Path, agent: str, learner: Any, env_fns: Sequence[Callable[[], Any]],
-             vec_env: str = "dummy", tensorboard_log: str | None = None) -> Side:
+    def load(
+        cls,
+        folder: Path,
+        agent: str,
+        learner: Any,
+        env_fns: Sequence[Callable[[], Any]],
+        vec_env: str = "dummy",
+        tensorboard_log: str | None = None,
+    ) -> Side:
         """Rebuild a side saved by `save` (to resume a run)."""
         from stable_baselines3.common.vec_env import VecNormalize
 
@@ -163,8 +190,9 @@ class Side:
         stats = folder / f"{agent}_vecnormalize.pkl"
         if stats.exists():
             venv = VecNormalize.load(str(stats), venv)
-        model = _algo_class(learner.algo).load(folder / f"{agent}.zip", env=venv, device="cpu",
-                                               tensorboard_log=tensorboard_log)
+        model = _algo_class(learner.algo).load(
+            folder / f"{agent}.zip", env=venv, device="cpu", tensorboard_log=tensorboard_log
+        )
         replay = folder / f"{agent}_replay.pkl"
         if replay.exists():
             model.load_replay_buffer(replay)

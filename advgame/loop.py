@@ -58,7 +58,11 @@ class Run:
             for it in range(start, cfg.iterations + 1):
                 row = self._iteration(it, bar)
                 for key, value in row.items():
-                    if key != "iteration" and isinstance(value, (int, float)) and np.isfinite(value):
+                    if (
+                        key != "iteration"
+                        and isinstance(value, (int, float))
+                        and np.isfinite(value)
+                    ):
                         if writer is not None:
                             writer.add_scalar(f"loop/{key}", value, it)
                 log.info("iteration %d/%d: %s", it, cfg.iterations, row)
@@ -92,17 +96,28 @@ class Run:
         a_ret, a_eps, clips = adv_stats.pop()
         steps = cfg.protagonist_steps + cfg.adversary_steps * len(t.learned)
         row: dict[str, Any] = {
-            "iteration": it, "protagonist_steps": prot.steps,
+            "iteration": it,
+            "protagonist_steps": prot.steps,
             "adversary_steps": sum(t.sides[a].steps for a in t.learned),
-            "protagonist_phase_true_return": p_ret, "protagonist_phase_episodes": p_eps,
-            "adversary_phase_true_return": a_ret, "adversary_phase_episodes": a_eps,
-            "adversary_clipped": clips, "fps": steps / max(elapsed, 1e-9), "wall_s": elapsed,
+            "protagonist_phase_true_return": p_ret,
+            "protagonist_phase_episodes": p_eps,
+            "adversary_phase_true_return": a_ret,
+            "adversary_phase_episodes": a_eps,
+            "adversary_clipped": clips,
+            "fps": steps / max(elapsed, 1e-9),
+            "wall_s": elapsed,
             **self._quick_eval(final, it),
         }
         t.population.save(self.dir / "population.json")
         append_progress(self.dir / "progress.csv", row, keep_below=it)
-        write_state(self.dir, {"iteration": it, "rng": t.rng.bit_generator.state,
-                               "checkpoint": str(final.relative_to(self.dir))})
+        write_state(
+            self.dir,
+            {
+                "iteration": it,
+                "rng": t.rng.bit_generator.state,
+                "checkpoint": str(final.relative_to(self.dir)),
+            },
+        )
         return row
 
     def _warmup(self, stats: EpisodeStats) -> None:
@@ -118,45 +133,73 @@ class Run:
         game = make(self.cfg.scenario, preset=self.cfg.preset, phase="eval")
         ckpt = self._protagonist_spec(folder)
         seed = self.cfg.seed + 100_000 + it
-        nominal = rollout(game, {t.protagonist: ckpt, **{a: load(_ZERO)() for a in game.adversaries}},
-                          seed=seed, episodes=self.cfg.eval_episodes)
+        nominal = rollout(
+            game,
+            {t.protagonist: ckpt, **{a: load(_ZERO)() for a in game.adversaries}},
+            seed=seed,
+            episodes=self.cfg.eval_episodes,
+        )
         attackers = {**t.fixed, **{a: t.population.of(a)[-1].spec for a in t.learned}}
-        attacked = rollout(game, {t.protagonist: ckpt, **attackers}, seed=seed,
-                           episodes=self.cfg.eval_episodes)
+        attacked = rollout(
+            game, {t.protagonist: ckpt, **attackers}, seed=seed, episodes=self.cfg.eval_episodes
+        )
         game.close()
-        return {"eval_nominal_return": float(np.mean([r.true_return for r in nominal])),
-                "eval_attacked_return": float(np.mean([r.true_return for r in attacked]))}
+        return {
+            "eval_nominal_return": float(np.mean([r.true_return for r in nominal])),
+            "eval_attacked_return": float(np.mean([r.true_return for r in attacked])),
+        }
 
     def _protagonist_spec(self, folder: Path) -> Any:
         from advgame.checkpoint import SB3Checkpoint
 
         agent = self.t.protagonist
         norm = folder / f"{agent}_obs_norm.npz"
-        return SB3Checkpoint(str(folder / f"{agent}.zip"), self.prot_cfg.algo,
-                             str(norm) if norm.exists() else None, deterministic=True)
+        return SB3Checkpoint(
+            str(folder / f"{agent}.zip"),
+            self.prot_cfg.algo,
+            str(norm) if norm.exists() else None,
+            deterministic=True,
+        )
 
     # -- building ---------------------------------------------------------------------------
     def _env_fns(self, agent: str, policies: dict[str, Any]) -> list[Any]:
         kwargs = {**self.t.train_kwargs, "phase": "train"}
-        return [view_factory(self.cfg.scenario, agent, policies, **kwargs) for _ in range(self.cfg.n_envs)]
+        return [
+            view_factory(self.cfg.scenario, agent, policies, **kwargs)
+            for _ in range(self.cfg.n_envs)
+        ]
 
     def _build_sides(self, folder: Path | None) -> None:
         t, cfg = self.t, self.cfg
         game = make(cfg.scenario, preset=cfg.preset)
         placeholder = ConstantPolicy(filler_action(game.action_space(t.protagonist)))
         game.close()
-        specs = [(t.protagonist, self.prot_cfg, dict(t.fixed), cfg.protagonist_steps + cfg.warmup_steps)]
+        specs = [
+            (t.protagonist, self.prot_cfg, dict(t.fixed), cfg.protagonist_steps + cfg.warmup_steps)
+        ]
         for a in t.learned:
             others = {k: v for k, v in t.fixed.items() if k != a}
-            specs.append((a, self.adv_cfg, {t.protagonist: placeholder, **others}, cfg.adversary_steps))
+            specs.append(
+                (a, self.adv_cfg, {t.protagonist: placeholder, **others}, cfg.adversary_steps)
+            )
         tb = str(self.dir / "tb")
         for k, (agent, learner, policies, per_iter) in enumerate(specs):
             fns = self._env_fns(agent, policies)
             if folder is None:
-                t.sides[agent] = Side(agent, learner, fns, cfg.seed + k, per_iter * cfg.iterations,
-                                      normalize=cfg.normalize, tensorboard_log=tb, vec_env=cfg.vec_env)
+                t.sides[agent] = Side(
+                    agent,
+                    learner,
+                    fns,
+                    cfg.seed + k,
+                    per_iter * cfg.iterations,
+                    normalize=cfg.normalize,
+                    tensorboard_log=tb,
+                    vec_env=cfg.vec_env,
+                )
             else:
-                t.sides[agent] = Side.load(folder, agent, learner, fns, cfg.vec_env, tensorboard_log=tb)
+                t.sides[agent] = Side.load(
+                    folder, agent, learner, fns, cfg.vec_env, tensorboard_log=tb
+                )
 
     def _fresh(self) -> int:
         t = self.t
@@ -204,8 +247,14 @@ def _progress_bar(total: int, done: int, label: str, show: bool) -> Any:
         return _NoBar()
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, initial=done, desc=f"train {label}", unit="step", smoothing=0.1,
-                mininterval=1.0)
+    return tqdm(
+        total=total,
+        initial=done,
+        desc=f"train {label}",
+        unit="step",
+        smoothing=0.1,
+        mininterval=1.0,
+    )
 
 
 def _tensorboard(folder: Path) -> Any:

@@ -59,8 +59,20 @@ class AgentInfo:
     def encode(self, value: Any) -> np.ndarray:
         """Raw perturbation (state offset, force, parameter value) -> this adversary's action."""
         if self.disruptor is None:
-            raise ConfigError(f"{self.agent!r} is a protagonist; it has no disruptor to encode for.")
+            raise ConfigError(
+                f"{self.agent!r} is a protagonist; it has no disruptor to encode for."
+            )
         return self.disruptor.encode(value)
+
+    @property
+    def action_shape(self) -> tuple[int, ...]:
+        """Shape of the agent's actions (``()`` for a discrete choice)."""
+        return tuple(self.action_space.shape or ())
+
+    @property
+    def action_size(self) -> int:
+        """Number of action components."""
+        return int(np.prod(self.action_shape))
 
     @property
     def noop_action(self) -> Any:

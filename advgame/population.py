@@ -28,7 +28,9 @@ SAMPLING = ("latest", "uniform", "fictitious")
 def spec_to_dict(spec: Any) -> dict[str, Any]:
     """A dataclass policy spec as a JSON-friendly dict."""
     if not dataclasses.is_dataclass(spec) or isinstance(spec, type):
-        raise ConfigError(f"Only dataclass policy specs can be stored in a population, got {spec!r}.")
+        raise ConfigError(
+            f"Only dataclass policy specs can be stored in a population, got {spec!r}."
+        )
     cls = type(spec)
     return {"type": f"{cls.__module__}:{cls.__qualname__}", "fields": dataclasses.asdict(spec)}
 
@@ -37,7 +39,9 @@ def spec_from_dict(data: dict[str, Any]) -> Any:
     """Rebuild a spec written by `spec_to_dict`."""
     cls = load(data["type"])
     hints = {f.name: f for f in dataclasses.fields(cls)}
-    fields = {k: tuple(v) if isinstance(v, list) and k in hints else v for k, v in data["fields"].items()}
+    fields = {
+        k: tuple(v) if isinstance(v, list) and k in hints else v for k, v in data["fields"].items()
+    }
     return cls(**fields)
 
 
@@ -62,14 +66,28 @@ class Member:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form."""
-        return {"id": self.id, "side": self.side, "agent": self.agent, "iteration": self.iteration,
-                "learned": self.learned, "meta": self.meta, "spec": spec_to_dict(self.spec)}
+        return {
+            "id": self.id,
+            "side": self.side,
+            "agent": self.agent,
+            "iteration": self.iteration,
+            "learned": self.learned,
+            "meta": self.meta,
+            "spec": spec_to_dict(self.spec),
+        }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Member:
         """Inverse of `to_dict`."""
-        return cls(data["id"], data["side"], data["agent"], spec_from_dict(data["spec"]),
-                   data.get("iteration", -1), data.get("learned", True), data.get("meta", {}))
+        return cls(
+            data["id"],
+            data["side"],
+            data["agent"],
+            spec_from_dict(data["spec"]),
+            data.get("iteration", -1),
+            data.get("learned", True),
+            data.get("meta", {}),
+        )
 
 
 class Population:
@@ -81,6 +99,7 @@ class Population:
         >>> pop.add(Member("zero", "adversary", "observation_adversary", ZeroAdversary(), learned=False))
         >>> [m.id for m in pop.of("observation_adversary")]
         ['zero']
+
     """
 
     def __init__(self, members: list[Member] | None = None) -> None:
@@ -103,8 +122,11 @@ class Population:
         return [m for m in self.members if m.agent == agent and (m.learned or not learned_only)]
 
     def sample(self, agent: str, how: str, rng: np.random.Generator) -> Member:
-        """Draw an opponent for `agent`: the ``latest`` member, ``uniform`` over all members, or
-        ``fictitious`` play (uniform over trained snapshots only)."""
+        """Draw an opponent for `agent` from its members.
+
+        ``latest``: the newest member; ``uniform``: any member; ``fictitious``: fictitious play,
+        uniform over trained snapshots only.
+        """
         if how not in SAMPLING:
             raise ConfigError(f"sampling must be one of {SAMPLING}, got {how!r}.")
         pool = self.of(agent, learned_only=how == "fictitious") or self.of(agent)

@@ -8,7 +8,7 @@ scenario is made, so listing scenarios imports no simulator. The built-in scenar
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -32,6 +32,7 @@ class Preset:
         >>> from advgame.disruptors import ObservationDisruptor
         >>> Preset((ObservationDisruptor(eps=0.1),), description="state attack").description
         'state attack'
+
     """
 
     disruptors: tuple[DisruptorSpec, ...]
@@ -72,8 +73,8 @@ class ScenarioSpec:
         return load(self.task)(**{**self.task_kwargs, **kwargs})
 
 
-def load(entry_point: str) -> Callable[..., Any]:
-    """Import ``"module:attr"``."""
+def load(entry_point: str) -> Any:
+    """Import ``"module:attr"`` (a callable, a class or a table)."""
     module, _, attr = entry_point.partition(":")
     try:
         return getattr(importlib.import_module(module), attr)
@@ -135,6 +136,7 @@ def make(
         >>> game = advgame.make("Hopper-v5", disruptors={"observation": {"eps": 0.075}})
         >>> game.protagonists, game.adversaries
         (('protagonist',), ('observation_adversary',))
+
     """
     from advgame.game import Game
 
@@ -155,8 +157,13 @@ def make(
     else:
         specs = _as_specs(disruptors)
     weight = cost_weight if cost_weight is not None else (chosen.cost_weight if chosen else 0.0)
-    game = Game(spec.make_task(**task_kwargs), specs, cost_weight=weight, phase=phase,
-                scenario_id=scenario_id)
+    game = Game(
+        spec.make_task(**task_kwargs),
+        specs,
+        cost_weight=weight,
+        phase=phase,
+        scenario_id=scenario_id,
+    )
     game.preset = chosen
     return game
 

@@ -52,7 +52,9 @@ def filler_action(space: spaces.Space) -> Any:
     return space.sample()
 
 
-def build_policies(game: Game, policies: Mapping[str, Any], default: str = "noop") -> dict[str, Policy]:
+def build_policies(
+    game: Game, policies: Mapping[str, Any], default: str = "noop"
+) -> dict[str, Policy]:
     """One `Policy` per agent of `game`.
 
     Adversaries not in `policies` get their no-op (the identity) when `default="noop"`;
@@ -60,7 +62,9 @@ def build_policies(game: Game, policies: Mapping[str, Any], default: str = "noop
     """
     unknown = set(policies) - set(game.possible_agents)
     if unknown:
-        raise ConfigError(f"Policies given for unknown agents {sorted(unknown)}; agents: {game.possible_agents}.")
+        raise ConfigError(
+            f"Policies given for unknown agents {sorted(unknown)}; agents: {game.possible_agents}."
+        )
     out: dict[str, Policy] = {}
     for agent in game.possible_agents:
         info = game.agent_info(agent)
@@ -69,12 +73,15 @@ def build_policies(game: Game, policies: Mapping[str, Any], default: str = "noop
         elif info.disruptor is not None and default == "noop":
             out[agent] = ConstantPolicy(info.noop_action)
         else:
-            raise ConfigError(f"No policy given for {agent!r}; pass one in policies={{{agent!r}: ...}}.")
+            raise ConfigError(
+                f"No policy given for {agent!r}; pass one in policies={{{agent!r}: ...}}."
+            )
     return out
 
 
-def rollout(game: Game, policies: Mapping[str, Any], seed: int | None = None,
-            episodes: int = 1) -> list[EpisodeResult]:
+def rollout(
+    game: Game, policies: Mapping[str, Any], seed: int | None = None, episodes: int = 1
+) -> list[EpisodeResult]:
     """Play `episodes` episodes; episode ``i`` resets with ``seed + i`` (if a seed is given).
 
     Each policy is reset with a seed derived from the episode seed, so a seeded rollout is
@@ -84,7 +91,11 @@ def rollout(game: Game, policies: Mapping[str, Any], seed: int | None = None,
     results = []
     for i in range(episodes):
         ep_seed = None if seed is None else seed + i
-        seeds = np.random.SeedSequence(ep_seed).generate_state(len(pols)) if ep_seed is not None else None
+        seeds = (
+            np.random.SeedSequence(ep_seed).generate_state(len(pols))
+            if ep_seed is not None
+            else None
+        )
         for j, p in enumerate(pols.values()):
             p.reset(None if seeds is None else int(seeds[j]))
         game.reset(seed=ep_seed)

@@ -34,6 +34,7 @@ class Schedule:
         True
         >>> Schedule(phase="eval").is_active(0, "train", None)
         False
+
     """
 
     every: int = 1
@@ -57,9 +58,7 @@ class Schedule:
         if not isinstance(self.every, int) or self.every < 1:
             raise ConfigError(f"Schedule.every must be an int >= 1, got {self.every!r}.")
         if not (0.0 <= float(self.probability) <= 1.0):
-            raise ConfigError(
-                f"Schedule.probability must be in [0, 1], got {self.probability!r}."
-            )
+            raise ConfigError(f"Schedule.probability must be in [0, 1], got {self.probability!r}.")
         if not isinstance(self.start, int) or self.start < 0:
             raise ConfigError(f"Schedule.start must be an int >= 0, got {self.start!r}.")
         if self.stop is not None and (not isinstance(self.stop, int) or self.stop <= self.start):

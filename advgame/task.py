@@ -13,7 +13,6 @@ from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 
@@ -36,6 +35,7 @@ class MujocoSim:
         owner: the object whose ``model``/``data`` attributes are the live simulation
             (a Gymnasium ``MujocoEnv``).
         xml_path: the model file, used to build an `MjSpec` on first use.
+
     """
 
     def __init__(self, owner: Any, xml_path: str | None) -> None:
@@ -64,7 +64,9 @@ class MujocoSim:
             import mujoco
 
             if self._xml_path is None:
-                raise ConfigError("This task base has no model file; shape changes are unavailable.")
+                raise ConfigError(
+                    "This task base has no model file; shape changes are unavailable."
+                )
             self._spec = mujoco.MjSpec.from_file(self._xml_path)
         return self._spec
 
@@ -93,8 +95,12 @@ class MujocoSim:
     def _id(self, kind: str, name: str, count: int) -> int:
         import mujoco
 
-        obj = {"body": mujoco.mjtObj.mjOBJ_BODY, "geom": mujoco.mjtObj.mjOBJ_GEOM,
-               "joint": mujoco.mjtObj.mjOBJ_JOINT, "actuator": mujoco.mjtObj.mjOBJ_ACTUATOR}[kind]
+        obj = {
+            "body": mujoco.mjtObj.mjOBJ_BODY,
+            "geom": mujoco.mjtObj.mjOBJ_GEOM,
+            "joint": mujoco.mjtObj.mjOBJ_JOINT,
+            "actuator": mujoco.mjtObj.mjOBJ_ACTUATOR,
+        }[kind]
         idx = mujoco.mj_name2id(self.model, obj, name)
         if idx < 0:
             names = self.names(kind)
@@ -173,7 +179,7 @@ class TaskBase(abc.ABC):
         """Render the task (as its `render_mode` says)."""
         return None
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 - an optional hook, no-op by default
         """Release simulator resources."""
 
 
@@ -184,6 +190,7 @@ class GymTask(TaskBase):
         env_id: a registered Gymnasium id, e.g. ``"HalfCheetah-v5"``.
         cost_key: the `info` key holding a safety cost, if the task has one.
         **kwargs: passed to `gymnasium.make` (``render_mode``, ``max_episode_steps``, ...).
+
     """
 
     AGENT = "protagonist"

@@ -96,10 +96,14 @@ class TrainConfig:
     def __post_init__(self) -> None:
         for name in ("iterations", "protagonist_steps", "n_envs", "snapshot_every"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
-                raise ConfigError(f"TrainConfig.{name} must be an int >= 1, got {getattr(self, name)!r}.")
+                raise ConfigError(
+                    f"TrainConfig.{name} must be an int >= 1, got {getattr(self, name)!r}."
+                )
         for name in ("adversary_steps", "warmup_steps", "eval_episodes"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 0:
-                raise ConfigError(f"TrainConfig.{name} must be an int >= 0, got {getattr(self, name)!r}.")
+                raise ConfigError(
+                    f"TrainConfig.{name} must be an int >= 0, got {getattr(self, name)!r}."
+                )
         if self.sampling not in SAMPLING:
             raise ConfigError(f"sampling must be one of {SAMPLING}, got {self.sampling!r}.")
         if not 0 < self.train_budget_scale:
@@ -125,8 +129,11 @@ def scaled(spec: Any, factor: float) -> Any:
     for name in ("eps", "max_force", "max_torque", "alpha"):
         if hasattr(spec, name):
             value = np.asarray(getattr(spec, name), dtype=float) * factor
-            changes[name] = min(float(value), 1.0) if name == "alpha" else (
-                float(value) if value.ndim == 0 else tuple(value.tolist()))
+            changes[name] = (
+                min(float(value), 1.0)
+                if name == "alpha"
+                else (float(value) if value.ndim == 0 else tuple(value.tolist()))
+            )
     return replace(spec, **changes)
 
 
@@ -140,20 +147,31 @@ class Trainer:
         probe = make(config.scenario, preset=config.preset)
         self.protagonist = probe.protagonists[0]
         if len(probe.protagonists) != 1:
-            raise ConfigError("Trainer drives single-protagonist scenarios; multi-agent learners "
-                              "plug in through advgame.agents.")
+            raise ConfigError(
+                "Trainer drives single-protagonist scenarios; multi-agent learners "
+                "plug in through advgame.agents."
+            )
         preset = probe.preset
         self.fixed = dict(preset.adversaries) if preset is not None else {}
-        self.learned = list(config.learned) if config.learned is not None else [
-            a for a in probe.adversaries if a not in self.fixed]
+        self.learned = (
+            list(config.learned)
+            if config.learned is not None
+            else [a for a in probe.adversaries if a not in self.fixed]
+        )
         for a in self.learned:
             if a not in probe.adversaries:
-                raise ConfigError(f"learned names {a!r}, not an adversary of this game {probe.adversaries}.")
-        self.normalized_targets = [d for d in probe.disruptors.values()
-                                   if getattr(d.spec, "space", "raw") == "normalized"]
+                raise ConfigError(
+                    f"learned names {a!r}, not an adversary of this game {probe.adversaries}."
+                )
+        self.normalized_targets = [
+            d for d in probe.disruptors.values() if getattr(d.spec, "space", "raw") == "normalized"
+        ]
         probe.close()
-        self.train_kwargs = {"disruptors": [scaled(d.spec, config.train_budget_scale)
-                                            for d in probe.disruptors.values()]}
+        self.train_kwargs = {
+            "disruptors": [
+                scaled(d.spec, config.train_budget_scale) for d in probe.disruptors.values()
+            ]
+        }
         self.rng = np.random.default_rng(config.seed)
         self.population = Population()
         self.iteration = 0
@@ -164,8 +182,10 @@ class Trainer:
         """Train the protagonist against opponents drawn from the population."""
         side = self.sides[self.protagonist]
         for i in range(self.cfg.n_envs):
-            drawn = {a: self._opponent(self.population.sample(a, self.cfg.sampling, self.rng))
-                     for a in self.learned}
+            drawn = {
+                a: self._opponent(self.population.sample(a, self.cfg.sampling, self.rng))
+                for a in self.learned
+            }
             side.set_policies(drawn, index=i)
         self._push_scale(side, side)
         side.learn(self.cfg.protagonist_steps, stats)
@@ -176,7 +196,9 @@ class Trainer:
         prot.freeze()
         for agent in self.learned:
             side = self.sides[agent]
-            fellows = {a: self._opponent(self.population.of(a)[-1]) for a in self.learned if a != agent}
+            fellows = {
+                a: self._opponent(self.population.of(a)[-1]) for a in self.learned if a != agent
+            }
             side.set_policies({self.protagonist: frozen, **fellows})
             self._push_scale(side, prot)
             if self.cfg.adversary_steps:
@@ -184,13 +206,23 @@ class Trainer:
 
     def snapshot(self, folder: Path) -> None:
         """Save the adversaries, add them to the population every `snapshot_every` iterations."""
-        keep = self.iteration % self.cfg.snapshot_every == 0 or self.iteration == self.cfg.iterations
+        keep = (
+            self.iteration % self.cfg.snapshot_every == 0 or self.iteration == self.cfg.iterations
+        )
         for agent in self.learned:
             spec = self.sides[agent].save(folder)
             if keep:
-                final = replace(spec, path=_final(spec.path), normalizer=_final(spec.normalizer))
-                self.population.add(Member(f"{agent}@{self.iteration}", "adversary", agent, final,
-                                           self.iteration, meta={"scenario": self.cfg.scenario}))
+                final = replace(spec, path=spec.path.replace(".partial", ""), normalizer=_final(spec.normalizer))
+                self.population.add(
+                    Member(
+                        f"{agent}@{self.iteration}",
+                        "adversary",
+                        agent,
+                        final,
+                        self.iteration,
+                        meta={"scenario": self.cfg.scenario},
+                    )
+                )
 
     # -- helpers ----------------------------------------------------------------------------
     def _opponent(self, member: Member) -> Any:
@@ -228,7 +260,9 @@ def resume(run_dir: str | Path, progress: bool = True) -> Path:
     if not (run_dir / "config.json").exists():
         raise ConfigError(f"No run in {run_dir} (no config.json).")
     config = load_json(TrainConfig, run_dir / "config.json")
-    return Run(Trainer(config, run_dir, progress)).execute(fresh=not (run_dir / "state.json").exists())
+    return Run(Trainer(config, run_dir, progress)).execute(
+        fresh=not (run_dir / "state.json").exists()
+    )
 
 
 def write_state(run_dir: Path, state: dict[str, Any]) -> None:
@@ -243,8 +277,11 @@ def append_progress(path: Path, row: dict[str, Any], keep_below: int | None = No
     rows: list[dict[str, Any]] = []
     if path.exists():
         with path.open() as f:
-            rows = [r for r in csv.DictReader(f)
-                    if keep_below is None or int(r["iteration"]) < keep_below]
+            rows = [
+                r
+                for r in csv.DictReader(f)
+                if keep_below is None or int(r["iteration"]) < keep_below
+            ]
     rows.append(row)
     fields = list(dict.fromkeys(k for r in rows for k in r))
     tmp = path.with_suffix(".csv.tmp")

@@ -41,6 +41,7 @@ class SingleAgentView(gym.Env):
         >>> obs, info = env.reset(seed=0)
         >>> env.observation_space.contains(obs)
         True
+
     """
 
     def __init__(self, game: Game, agent: str, policies: Mapping[str, Any] | None = None) -> None:
@@ -50,7 +51,9 @@ class SingleAgentView(gym.Env):
         self.agent = agent
         others = {a: p for a, p in (policies or {}).items() if a != agent}
         if policies and agent in policies:
-            raise ConfigError(f"{agent!r} is the learner of this view; do not pass a policy for it.")
+            raise ConfigError(
+                f"{agent!r} is the learner of this view; do not pass a policy for it."
+            )
         probe = {agent: _Placeholder(), **others}
         self.policies = {a: p for a, p in build_policies(game, probe).items() if a != agent}
         disruptor = game.disruptors.get(agent)
@@ -97,7 +100,13 @@ class SingleAgentView(gym.Env):
             # The learner had no decision left when the time limit hit: for it the episode
             # ended with its last decision, so bootstrapping past the limit would be wrong.
             tally.terminated, tally.truncated = True, False
-        return self.game.observe(self.agent), tally.reward, tally.terminated, tally.truncated, tally.info
+        return (
+            self.game.observe(self.agent),
+            tally.reward,
+            tally.terminated,
+            tally.truncated,
+            tally.info,
+        )
 
     def _play(self, actions: dict[str, Any], tally: _Tally) -> None:
         move = self.game.play(actions)
@@ -113,14 +122,19 @@ class SingleAgentView(gym.Env):
             info["cost"] = info.get("cost", 0.0) + move.costs[self.agent]
         else:
             tally.reward -= move.payoff
-        for key, value in (("true_reward", move.reward), ("true_cost", move.cost),
-                           ("payoff", move.payoff)):
+        for key, value in (
+            ("true_reward", move.reward),
+            ("true_cost", move.cost),
+            ("payoff", move.payoff),
+        ):
             info[key] = info.get(key, 0.0) + value
         tally.terminated, tally.truncated = move.terminated, move.truncated
 
     def _others(self) -> dict[str, Any]:
         game = self.game
-        return {a: self.policies[a].act(game.observe(a)) for a in game.next_movers if a != self.agent}
+        return {
+            a: self.policies[a].act(game.observe(a)) for a in game.next_movers if a != self.agent
+        }
 
     def set_policies(self, policies: Mapping[str, Any]) -> None:
         """Swap some embedded policies (the training loop does this between phases).
@@ -128,7 +142,9 @@ class SingleAgentView(gym.Env):
         Works through `VecEnv.env_method` in worker processes; specs are built there.
         """
         if self.agent in policies:
-            raise ConfigError(f"{self.agent!r} is the learner of this view; do not pass a policy for it.")
+            raise ConfigError(
+                f"{self.agent!r} is the learner of this view; do not pass a policy for it."
+            )
         probe = {self.agent: _Placeholder(), **{a: p for a, p in self.policies.items()}, **policies}
         built = build_policies(self.game, probe)
         for a in policies:
@@ -170,15 +186,17 @@ class _Placeholder:
         raise AssertionError("the learner's placeholder policy is never queried")
 
 
-def _build_view(scenario_id: str, agent: str, policies: Mapping[str, Any],
-                make_kwargs: Mapping[str, Any]) -> SingleAgentView:
+def _build_view(
+    scenario_id: str, agent: str, policies: Mapping[str, Any], make_kwargs: Mapping[str, Any]
+) -> SingleAgentView:
     from advgame.registry import make
 
     return SingleAgentView(make(scenario_id, **make_kwargs), agent, policies)
 
 
-def view_factory(scenario_id: str, agent: str, policies: Mapping[str, Any] | None = None,
-                 **make_kwargs: Any) -> Callable[[], SingleAgentView]:
+def view_factory(
+    scenario_id: str, agent: str, policies: Mapping[str, Any] | None = None, **make_kwargs: Any
+) -> Callable[[], SingleAgentView]:
     """A picklable thunk that builds the game and the view (in a `SubprocVecEnv` worker).
 
     `policies` must be picklable: policy specs, or policies whose state pickles.
@@ -188,5 +206,8 @@ def view_factory(scenario_id: str, agent: str, policies: Mapping[str, Any] | Non
         >>> venv = DummyVecEnv([view_factory("Hopper-v5", "protagonist", preset="default")])
         >>> venv.observation_space.shape
         (11,)
+
     """
-    return functools.partial(_build_view, scenario_id, agent, dict(policies or {}), dict(make_kwargs))
+    return functools.partial(
+        _build_view, scenario_id, agent, dict(policies or {}), dict(make_kwargs)
+    )

@@ -29,6 +29,7 @@ class LinearDecay:
         self.span = self.total
 
     def __call__(self, progress_remaining: float) -> float:
+        """The learning rate at SB3's `progress_remaining` of the current ``learn()`` call."""
         done = self.offset + (1.0 - progress_remaining) * self.span
         return self.initial * max(1.0 - done / self.total, 0.0)
 
@@ -73,16 +74,34 @@ class PPOConfig:
     def __post_init__(self) -> None:
         _check_positive(self, ("learning_rate", "n_steps", "n_epochs", "batch_size"))
 
-    def make_model(self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None) -> Any:
+    def make_model(
+        self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
+    ) -> Any:
         """Build an SB3 PPO on `env` (a VecEnv)."""
         from stable_baselines3 import PPO
 
-        lr: Any = LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
-        return PPO("MlpPolicy", env, learning_rate=lr, n_steps=self.n_steps, batch_size=self.batch_size,
-                   n_epochs=self.n_epochs, gamma=self.gamma, gae_lambda=self.gae_lambda,
-                   clip_range=self.clip_range, ent_coef=self.ent_coef, vf_coef=self.vf_coef,
-                   max_grad_norm=self.max_grad_norm, policy_kwargs={"net_arch": list(self.net_arch)},
-                   seed=seed, device="cpu", verbose=0, tensorboard_log=tensorboard_log)
+        lr: Any = (
+            LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
+        )
+        return PPO(
+            "MlpPolicy",
+            env,
+            learning_rate=lr,
+            n_steps=self.n_steps,
+            batch_size=self.batch_size,
+            n_epochs=self.n_epochs,
+            gamma=self.gamma,
+            gae_lambda=self.gae_lambda,
+            clip_range=self.clip_range,
+            ent_coef=self.ent_coef,
+            vf_coef=self.vf_coef,
+            max_grad_norm=self.max_grad_norm,
+            policy_kwargs={"net_arch": list(self.net_arch)},
+            seed=seed,
+            device="cpu",
+            verbose=0,
+            tensorboard_log=tensorboard_log,
+        )
 
 
 @dataclass(frozen=True)
@@ -116,16 +135,33 @@ class SACConfig:
     def __post_init__(self) -> None:
         _check_positive(self, ("learning_rate", "buffer_size", "batch_size", "train_freq"))
 
-    def make_model(self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None) -> Any:
+    def make_model(
+        self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
+    ) -> Any:
         """Build an SB3 SAC on `env`."""
         from stable_baselines3 import SAC
 
-        lr: Any = LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
-        return SAC("MlpPolicy", env, learning_rate=lr, buffer_size=self.buffer_size,
-                   learning_starts=self.learning_starts, batch_size=self.batch_size, tau=self.tau,
-                   gamma=self.gamma, train_freq=self.train_freq, gradient_steps=self.gradient_steps,
-                   ent_coef=self.ent_coef, policy_kwargs={"net_arch": list(self.net_arch)},
-                   seed=seed, device="cpu", verbose=0, tensorboard_log=tensorboard_log)
+        lr: Any = (
+            LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
+        )
+        return SAC(
+            "MlpPolicy",
+            env,
+            learning_rate=lr,
+            buffer_size=self.buffer_size,
+            learning_starts=self.learning_starts,
+            batch_size=self.batch_size,
+            tau=self.tau,
+            gamma=self.gamma,
+            train_freq=self.train_freq,
+            gradient_steps=self.gradient_steps,
+            ent_coef=self.ent_coef,
+            policy_kwargs={"net_arch": list(self.net_arch)},
+            seed=seed,
+            device="cpu",
+            verbose=0,
+            tensorboard_log=tensorboard_log,
+        )
 
 
 @dataclass(frozen=True)
@@ -157,7 +193,9 @@ class TD3Config:
     def __post_init__(self) -> None:
         _check_positive(self, ("learning_rate", "buffer_size", "batch_size", "policy_delay"))
 
-    def make_model(self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None) -> Any:
+    def make_model(
+        self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
+    ) -> Any:
         """Build an SB3 TD3 on `env`."""
         import numpy as np
         from stable_baselines3 import TD3
@@ -166,12 +204,26 @@ class TD3Config:
         n = env.action_space.shape[-1]
         half = (env.action_space.high - env.action_space.low) / 2.0
         noise = NormalActionNoise(np.zeros(n), self.action_noise * half * np.ones(n))
-        lr: Any = LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
-        return TD3("MlpPolicy", env, learning_rate=lr, buffer_size=self.buffer_size,
-                   learning_starts=self.learning_starts, batch_size=self.batch_size, tau=self.tau,
-                   gamma=self.gamma, policy_delay=self.policy_delay, action_noise=noise,
-                   policy_kwargs={"net_arch": list(self.net_arch)}, seed=seed, device="cpu",
-                   verbose=0, tensorboard_log=tensorboard_log)
+        lr: Any = (
+            LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
+        )
+        return TD3(
+            "MlpPolicy",
+            env,
+            learning_rate=lr,
+            buffer_size=self.buffer_size,
+            learning_starts=self.learning_starts,
+            batch_size=self.batch_size,
+            tau=self.tau,
+            gamma=self.gamma,
+            policy_delay=self.policy_delay,
+            action_noise=noise,
+            policy_kwargs={"net_arch": list(self.net_arch)},
+            seed=seed,
+            device="cpu",
+            verbose=0,
+            tensorboard_log=tensorboard_log,
+        )
 
 
 LEARNERS: dict[str, type] = {"ppo": PPOConfig, "sac": SACConfig, "td3": TD3Config}

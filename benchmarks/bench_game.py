@@ -20,9 +20,9 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from advgame.adversaries import GaussianAdversary
 
 import advgame
-from advgame.adversaries import GaussianAdversary
 from advgame.views import SingleAgentView
 
 ENV = "HalfCheetah-v5"
@@ -41,7 +41,9 @@ def bench_raw(actions: np.ndarray) -> float:
 
 def bench_view(actions: np.ndarray) -> float:
     game = advgame.make(ENV, preset="state-gauss-0.1")
-    env = SingleAgentView(game, "protagonist", {"observation_adversary": GaussianAdversary(std=0.1)})
+    env = SingleAgentView(
+        game, "protagonist", {"observation_adversary": GaussianAdversary(std=0.1)}
+    )
     env.reset(seed=0)
     start = time.perf_counter()
     for a in actions:
@@ -57,8 +59,11 @@ def bench_parallel(actions: np.ndarray, adv_obs: np.ndarray, adv_act: np.ndarray
     steps = 0
     start = time.perf_counter()
     while steps < len(actions):
-        move = {"protagonist": actions[steps], "observation_adversary": adv_obs[steps],
-                "action_adversary": adv_act[steps]}
+        move = {
+            "protagonist": actions[steps],
+            "observation_adversary": adv_obs[steps],
+            "action_adversary": adv_act[steps],
+        }
         if game.move == "act":
             steps += 1
         game.step(move)
@@ -81,12 +86,18 @@ def main() -> None:
         best["raw"] = max(best["raw"], bench_raw(actions))
         best["view"] = max(best["view"], bench_view(actions))
         best["parallel"] = max(best["parallel"], bench_parallel(actions, adv_obs, adv_act))
-        print(f"round {r + 1}/{args.rounds}: " + ", ".join(f"{k} {v:,.0f}" for k, v in best.items()))
+        print(
+            f"round {r + 1}/{args.rounds}: " + ", ".join(f"{k} {v:,.0f}" for k, v in best.items())
+        )
     raw = best["raw"]
     print(f"\n{ENV}, {args.steps} steps x {args.rounds} rounds, best round (steps/s):")
     print(f"  raw gymnasium env            {raw:10,.0f}   1.000")
-    print(f"  protagonist view + N(0,0.1)  {best['view']:10,.0f}   {best['view'] / raw:.3f}  (goal >= 0.95)")
-    print(f"  ParallelEnv, obs+act advs    {best['parallel']:10,.0f}   {best['parallel'] / raw:.3f}  (goal >= 0.90)")
+    print(
+        f"  protagonist view + N(0,0.1)  {best['view']:10,.0f}   {best['view'] / raw:.3f}  (goal >= 0.95)"
+    )
+    print(
+        f"  ParallelEnv, obs+act advs    {best['parallel']:10,.0f}   {best['parallel'] / raw:.3f}  (goal >= 0.90)"
+    )
 
 
 if __name__ == "__main__":

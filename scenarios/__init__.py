@@ -17,8 +17,16 @@ _BOX2D = "advgame.scenarios.box2d"
 
 
 def _gym(env_id: str, family: str, module: str, description: str) -> None:
-    register(ScenarioSpec(id=env_id, task=f"{module}:make_task", presets=f"{module}:presets",
-                          task_kwargs={"env_id": env_id}, family=family, description=description))
+    register(
+        ScenarioSpec(
+            id=env_id,
+            task=f"{module}:make_task",
+            presets=f"{module}:presets",
+            task_kwargs={"env_id": env_id},
+            family=family,
+            description=description,
+        )
+    )
 
 
 # Gymnasium MuJoCo v5: observation, reward, action, dynamics and force disruptors.

@@ -8,9 +8,10 @@ observation budget is in pixel intensity units (0-255).
 
 from __future__ import annotations
 
+from advgame.scenarios.common import gaussian_presets, make_task
+
 from advgame.disruptors import ActionDisruptor, ObservationDisruptor, RewardDisruptor
 from advgame.registry import Preset
-from advgame.scenarios.common import gaussian_presets, make_task
 
 __all__ = ["make_task", "presets"]
 
@@ -24,8 +25,12 @@ def presets(env_id: str) -> dict[str, Preset]:
     act = ActionDisruptor(mode="probabilistic", alpha=0.1) if discrete else ActionDisruptor(eps=0.1)
     what = "probabilistic (α = 0.1)" if discrete else "ε = 0.1"
     return {
-        "default": Preset((obs, act), description=f"bounded observation and action ({what}) adversaries"),
-        "full": Preset((obs, RewardDisruptor(eps=0.1), act),
-                       description="observation, reward and action adversaries"),
+        "default": Preset(
+            (obs, act), description=f"bounded observation and action ({what}) adversaries"
+        ),
+        "full": Preset(
+            (obs, RewardDisruptor(eps=0.1), act),
+            description="observation, reward and action adversaries",
+        ),
         **gaussian_presets(action=act if discrete else None),
     }

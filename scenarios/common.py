@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from advgame.adversaries import GaussianAdversary, UniformAdversary
+
 from advgame.disruptors import ActionDisruptor, ObservationDisruptor, RewardDisruptor
 from advgame.registry import Preset
 from advgame.schedule import Schedule
@@ -28,24 +29,34 @@ def gaussian_presets(action: ActionDisruptor | None = None) -> dict[str, Preset]
     out: dict[str, Preset] = {}
     for sigma in (0.1, 0.15):
         out[f"state-gauss-{sigma}"] = Preset(
-            (obs_unb,), {"observation_adversary": GaussianAdversary(std=sigma)},
-            f"paper: state noise N(0, {sigma}) every step")
+            (obs_unb,),
+            {"observation_adversary": GaussianAdversary(std=sigma)},
+            f"paper: state noise N(0, {sigma}) every step",
+        )
         if action is None:
             out[f"action-gauss-{sigma}"] = Preset(
-                (ActionDisruptor(bounded=False),), {"action_adversary": GaussianAdversary(std=sigma)},
-                f"paper: action noise N(0, {sigma}) every step")
+                (ActionDisruptor(bounded=False),),
+                {"action_adversary": GaussianAdversary(std=sigma)},
+                f"paper: action noise N(0, {sigma}) every step",
+            )
     out["state-uniform-0.2-0.8"] = Preset(
-        (ObservationDisruptor(eps=0.8),), {"observation_adversary": UniformAdversary(0.2, 0.8)},
-        "paper: state noise U[0.2, 0.8] every step")
+        (ObservationDisruptor(eps=0.8),),
+        {"observation_adversary": UniformAdversary(0.2, 0.8)},
+        "paper: state noise U[0.2, 0.8] every step",
+    )
     out["state-gauss-0.1-100F"] = Preset(
         (ObservationDisruptor(bounded=False, schedule=Schedule.every_n(100)),),
         {"observation_adversary": GaussianAdversary(std=0.1)},
-        "paper: state noise N(0, 0.1) every 100 steps")
+        "paper: state noise N(0, 0.1) every 100 steps",
+    )
     out["state-gauss-0.1-post"] = Preset(
         (ObservationDisruptor(bounded=False, schedule=Schedule(phase="eval")),),
         {"observation_adversary": GaussianAdversary(std=0.1)},
-        "paper: state noise N(0, 0.1) at evaluation only (post-training setting)")
+        "paper: state noise N(0, 0.1) at evaluation only (post-training setting)",
+    )
     out["reward-gauss-0.1"] = Preset(
-        (RewardDisruptor(bounded=False),), {"reward_adversary": GaussianAdversary(std=0.1)},
-        "paper: observed-reward noise N(0, 0.1)")
+        (RewardDisruptor(bounded=False),),
+        {"reward_adversary": GaussianAdversary(std=0.1)},
+        "paper: observed-reward noise N(0, 0.1)",
+    )
     return out

@@ -20,6 +20,8 @@ Presets of every MuJoCo scenario:
 from __future__ import annotations
 
 from advgame.adversaries import ConstantAdversary, SinusoidAdversary, UniformAdversary
+from advgame.scenarios.common import gaussian_presets, make_task
+
 from advgame.disruptors import (
     ActionDisruptor,
     DynamicsDisruptor,
@@ -29,7 +31,6 @@ from advgame.disruptors import (
     RewardDisruptor,
 )
 from advgame.registry import Preset
-from advgame.scenarios.common import gaussian_presets, make_task
 from advgame.schedule import Schedule
 
 __all__ = ["ATLA_EPS", "FORCES", "make_task", "presets"]
@@ -54,18 +55,44 @@ ATLA_EPS = {"Ant-v5": 0.15, "HalfCheetah-v5": 0.15, "Hopper-v5": 0.075, "Walker2
 
 _GRAVITY_WIND = (Param("gravity", 9.81, 19.82), Param("wind", 0.8, 1.2))
 _SHIFTS: dict[str, dict] = {
-    "Ant-v5": {"params": _GRAVITY_WIND, "base": (14.715, 1.0), "amp": (4.905, 0.2), "freq": 0.5,
-               "low": (9.81, 0.8), "high": (19.82, 1.2)},
-    "Humanoid-v5": {"params": _GRAVITY_WIND, "base": (14.715, 1.0), "amp": (4.905, 0.2),
-                    "freq": 0.5, "low": (9.81, 0.8), "high": (19.82, 1.2)},
-    "Walker2d-v5": {"params": (Param("length", 0.2, 0.6, names=("torso",)),
-                               Param("length", 0.1, 0.3, names=("foot", "foot_left"))),
-                    "base": (0.4, 0.2), "amp": (0.2, 0.1), "freq": 0.3,
-                    "low": (0.2, 0.1), "high": (0.6, 0.3)},
-    "Hopper-v5": {"params": (Param("length", 0.3, 0.5, names=("torso",)),
-                             Param("length", 0.29, 0.49, names=("foot",))),
-                  "base": (0.4, 0.39), "amp": (0.1, 0.1), "freq": 0.2,
-                  "low": (0.3, 0.29), "high": (0.5, 0.49)},
+    "Ant-v5": {
+        "params": _GRAVITY_WIND,
+        "base": (14.715, 1.0),
+        "amp": (4.905, 0.2),
+        "freq": 0.5,
+        "low": (9.81, 0.8),
+        "high": (19.82, 1.2),
+    },
+    "Humanoid-v5": {
+        "params": _GRAVITY_WIND,
+        "base": (14.715, 1.0),
+        "amp": (4.905, 0.2),
+        "freq": 0.5,
+        "low": (9.81, 0.8),
+        "high": (19.82, 1.2),
+    },
+    "Walker2d-v5": {
+        "params": (
+            Param("length", 0.2, 0.6, names=("torso",)),
+            Param("length", 0.1, 0.3, names=("foot", "foot_left")),
+        ),
+        "base": (0.4, 0.2),
+        "amp": (0.2, 0.1),
+        "freq": 0.3,
+        "low": (0.2, 0.1),
+        "high": (0.6, 0.3),
+    },
+    "Hopper-v5": {
+        "params": (
+            Param("length", 0.3, 0.5, names=("torso",)),
+            Param("length", 0.29, 0.49, names=("foot",)),
+        ),
+        "base": (0.4, 0.39),
+        "amp": (0.1, 0.1),
+        "freq": 0.2,
+        "low": (0.3, 0.29),
+        "high": (0.5, 0.49),
+    },
 }
 
 
@@ -75,8 +102,10 @@ def _force(env_id: str, scale: float = 1.0) -> ForceDisruptor:
 
 
 def _dynamics_20pct() -> DynamicsDisruptor:
-    params = tuple(Param(k, 0.8, 1.2, relative=True)
-                   for k in ("mass", "gravity", "friction", "damping", "gear"))
+    params = tuple(
+        Param(k, 0.8, 1.2, relative=True)
+        for k in ("mass", "gravity", "friction", "damping", "gear")
+    )
     return DynamicsDisruptor(params=params, schedule=Schedule.per_episode())
 
 
@@ -85,32 +114,52 @@ def _shift_presets(env_id: str) -> dict[str, Preset]:
     spec = DynamicsDisruptor(params=s["params"], schedule=Schedule.per_episode())
     what = " and ".join(sorted({p.kind for p in s["params"]}))
     return {
-        "shift-deterministic": Preset((spec,), {"dynamics_adversary": ConstantAdversary(s["base"])},
-                                      f"appendix: fixed {what} shift {s['base']}"),
-        "shift-uniform": Preset((spec,), {"dynamics_adversary": UniformAdversary(s["low"], s["high"])},
-                                f"appendix: {what} ~ U({s['low']}, {s['high']}) per episode"),
+        "shift-deterministic": Preset(
+            (spec,),
+            {"dynamics_adversary": ConstantAdversary(s["base"])},
+            f"appendix: fixed {what} shift {s['base']}",
+        ),
+        "shift-uniform": Preset(
+            (spec,),
+            {"dynamics_adversary": UniformAdversary(s["low"], s["high"])},
+            f"appendix: {what} ~ U({s['low']}, {s['high']}) per episode",
+        ),
         "shift-sinusoid": Preset(
-            (spec,), {"dynamics_adversary": SinusoidAdversary(s["base"], s["amp"], s["freq"])},
-            f"appendix: {what} = {s['base']} + {s['amp']}·sin({s['freq']}·episode)"),
+            (spec,),
+            {"dynamics_adversary": SinusoidAdversary(s["base"], s["amp"], s["freq"])},
+            f"appendix: {what} = {s['base']} + {s['amp']}·sin({s['freq']}·episode)",
+        ),
     }
 
 
 def presets(env_id: str) -> dict[str, Preset]:
     """The presets of MuJoCo scenario `env_id` (see the module docstring)."""
     out = {
-        "default": Preset((ObservationDisruptor(eps=0.1), ActionDisruptor(eps=0.1)),
-                          description="bounded observation and action adversaries, ε = 0.1"),
-        "full": Preset((ObservationDisruptor(eps=0.1), RewardDisruptor(eps=0.1),
-                        ActionDisruptor(eps=0.1), _dynamics_20pct(), _force(env_id)),
-                       description="every disruptor kind: observation, reward, action, dynamics, force"),
-        "rarl": Preset((_force(env_id),), description="RARL-style bounded forces on " +
-                       ", ".join(FORCES[env_id][0])),
+        "default": Preset(
+            (ObservationDisruptor(eps=0.1), ActionDisruptor(eps=0.1)),
+            description="bounded observation and action adversaries, ε = 0.1",
+        ),
+        "full": Preset(
+            (
+                ObservationDisruptor(eps=0.1),
+                RewardDisruptor(eps=0.1),
+                ActionDisruptor(eps=0.1),
+                _dynamics_20pct(),
+                _force(env_id),
+            ),
+            description="every disruptor kind: observation, reward, action, dynamics, force",
+        ),
+        "rarl": Preset(
+            (_force(env_id),),
+            description="RARL-style bounded forces on " + ", ".join(FORCES[env_id][0]),
+        ),
         **gaussian_presets(),
     }
     if env_id in ATLA_EPS:
         out["atla"] = Preset(
             (ObservationDisruptor(eps=ATLA_EPS[env_id], space="normalized"),),
-            description=f"ATLA: L∞ observation attack, ε = {ATLA_EPS[env_id]} in normalized units")
+            description=f"ATLA: L∞ observation attack, ε = {ATLA_EPS[env_id]} in normalized units",
+        )
     if env_id in _SHIFTS:
         out.update(_shift_presets(env_id))
     return out

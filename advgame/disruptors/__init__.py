@@ -50,6 +50,7 @@ def from_config(kind: str, config: Mapping[str, Any] | DisruptorSpec) -> Disrupt
     Example:
         >>> from_config("observation", {"eps": 0.1, "schedule": {"every": 100}}).schedule.every
         100
+
     """
     if isinstance(config, DisruptorSpec):
         return config

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -37,6 +37,7 @@ class ActionDisruptor(DisruptorSpec):
         >>> game = advgame.make("Hopper-v5", disruptors=[ActionDisruptor(eps=0.1)])
         >>> game.action_space("action_adversary").shape
         (3,)
+
     """
 
     kind = "action"
@@ -74,7 +75,9 @@ class ActionDisruptor(DisruptorSpec):
                     f"(the adversary's choice replaces the action with probability alpha), not {self.mode!r}."
                 )
             if not isinstance(space, (spaces.Box, spaces.Discrete)):
-                raise ConfigError(f"{t!r} has action space {space}; only Box and Discrete are supported.")
+                raise ConfigError(
+                    f"{t!r} has action space {space}; only Box and Discrete are supported."
+                )
         return ActionRuntime(self, task, targets)
 
 
@@ -87,20 +90,31 @@ class ActionRuntime(AdditiveDisruptor):
         self.targets = targets
         self.mode = spec.mode
         self.alpha = float(spec.alpha)
-        self.spaces = {t: task.action_spaces[t] for t in targets}
+        # build() checked that every target acts in a Box or a Discrete space
+        self.spaces: dict[str, spaces.Box | spaces.Discrete] = {
+            t: cast(spaces.Box | spaces.Discrete, task.action_spaces[t]) for t in targets
+        }
         self.sizes = {t: _size(s) for t, s in self.spaces.items()}
         units = []
         for t in targets:
             s = self.spaces[t]
             if spec.mode == "additive":
-                eps = as_budget(spec.eps, self.sizes[t], "ActionDisruptor.eps") if spec.bounded else np.ones(self.sizes[t])
+                eps = (
+                    as_budget(spec.eps, self.sizes[t], "ActionDisruptor.eps")
+                    if spec.bounded
+                    else np.ones(self.sizes[t])
+                )
                 units.append(eps)
             elif isinstance(s, spaces.Box):
                 units.append((s.high - s.low).reshape(-1) / 2.0)
             else:
                 units.append(np.ones(self.sizes[t]))
-        super().__init__(spec, np.concatenate(units), bounded=spec.bounded,
-                         blocks=[self.sizes[t] for t in targets])
+        super().__init__(
+            spec,
+            np.concatenate(units),
+            bounded=spec.bounded,
+            blocks=[self.sizes[t] for t in targets],
+        )
 
     def encode(self, value: Any) -> np.ndarray:
         """Raw units -> adversary action: an offset (additive) or the adversary's own action."""
@@ -146,5 +160,5 @@ class ActionRuntime(AdditiveDisruptor):
             actions[t] = np.clip(new, space.low, space.high).astype(space.dtype)
 
 
-def _size(space: spaces.Space) -> int:
+def _size(space: spaces.Box | spaces.Discrete) -> int:
     return int(space.n) if isinstance(space, spaces.Discrete) else int(np.prod(space.shape))

@@ -47,6 +47,7 @@ def as_budget(value: float | Sequence[float], size: int, what: str) -> np.ndarra
 
     Raises:
         BudgetError: if it is negative, non-finite or of the wrong length.
+
     """
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim > 1 or (arr.ndim == 1 and arr.shape[0] != size):
@@ -121,6 +122,7 @@ class Disruptor(abc.ABC):
             perturbation.
         norm: ``"linf"`` clips each component; ``"l2"`` also projects each target's block onto
             the unit ball (`blocks` gives the block sizes).
+
     """
 
     hook: ClassVar[Hook]
@@ -156,6 +158,7 @@ class Disruptor(abc.ABC):
 
         Raises:
             ActionError: wrong shape, or NaN/inf in the action.
+
         """
         u = np.asarray(action, dtype=np.float64)
         if u.shape != self.shape:
@@ -212,9 +215,7 @@ class Disruptor(abc.ABC):
         """Perturb protagonists' observations in place (observation disruptors)."""
         raise NotImplementedError(f"{type(self).__name__} is not an observation disruptor.")
 
-    def action(
-        self, actions: dict[str, Any], u: np.ndarray, rng: np.random.Generator
-    ) -> None:
+    def action(self, actions: dict[str, Any], u: np.ndarray, rng: np.random.Generator) -> None:
         """Perturb protagonists' actions in place (action disruptors)."""
         raise NotImplementedError(f"{type(self).__name__} is not an action disruptor.")
 
@@ -226,7 +227,7 @@ class Disruptor(abc.ABC):
         """Change the simulator before it steps; `u` is None on a step the schedule skips."""
         raise NotImplementedError(f"{type(self).__name__} is not an environment disruptor.")
 
-    def restore(self, sim: MujocoSim) -> None:
+    def restore(self, sim: MujocoSim) -> None:  # noqa: B027 - an optional hook, no-op by default
         """Put every parameter this disruptor changed back to its nominal value."""
 
 
@@ -236,8 +237,14 @@ class AdditiveDisruptor(Disruptor):
     `encode` inverts it (components with a zero budget encode to 0).
     """
 
-    def __init__(self, spec: DisruptorSpec, unit: np.ndarray, bounded: bool = True,
-                 norm: str = "linf", blocks: Sequence[int] | None = None) -> None:
+    def __init__(
+        self,
+        spec: DisruptorSpec,
+        unit: np.ndarray,
+        bounded: bool = True,
+        norm: str = "linf",
+        blocks: Sequence[int] | None = None,
+    ) -> None:
         super().__init__(spec, int(unit.shape[0]), bounded=bounded, norm=norm, blocks=blocks)
         self.unit = unit.astype(np.float64)
 

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from advgame.disruptors.base import DisruptorSpec, Disruptor
+from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
 if TYPE_CHECKING:
@@ -26,8 +26,15 @@ __all__ = ["DynamicsDisruptor", "DynamicsRuntime", "Param"]
 
 KINDS = ("mass", "gravity", "wind", "friction", "damping", "gear", "length")
 # Which model object each kind names in `Param.names` (None: a global option, no names).
-NAMED = {"mass": "body", "length": "body", "friction": "geom", "damping": "joint",
-         "gear": "actuator", "gravity": None, "wind": None}
+NAMED = {
+    "mass": "body",
+    "length": "body",
+    "friction": "geom",
+    "damping": "joint",
+    "gear": "actuator",
+    "gravity": None,
+    "wind": None,
+}
 
 
 @dataclass(frozen=True)
@@ -37,6 +44,7 @@ class Param:
     Example:
         >>> Param("gravity", 9.81, 19.62).kind
         'gravity'
+
     """
 
     kind: Literal["mass", "gravity", "wind", "friction", "damping", "gear", "length"]
@@ -72,9 +80,13 @@ class Param:
         if self.kind in ("mass", "length") and lo == 0 and not self.relative:
             raise BudgetError(f"Param({self.kind!r}) must be > 0, got low={self.low!r}.")
         if isinstance(self.names, str):
-            raise ConfigError(f"Param.names must be a sequence of names, got the string {self.names!r}.")
+            raise ConfigError(
+                f"Param.names must be a sequence of names, got the string {self.names!r}."
+            )
         if NAMED[self.kind] is None and tuple(self.names):
-            raise ConfigError(f"Param({self.kind!r}) is global and takes no names, got {self.names!r}.")
+            raise ConfigError(
+                f"Param({self.kind!r}) is global and takes no names, got {self.names!r}."
+            )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,6 +101,7 @@ class DynamicsDisruptor(DisruptorSpec):
         >>> spec = DynamicsDisruptor(params=[Param("gravity", 9.81, 19.62)])
         >>> advgame.make("Ant-v5", disruptors=[spec]).action_space("dynamics_adversary").shape
         (1,)
+
     """
 
     kind = "dynamics"
@@ -117,12 +130,20 @@ class _Bound:
         if kind and not p.names and p.kind == "length":
             raise ConfigError("Param('length') needs the bodies to lengthen in names=(...).")
         if kind and not p.names:  # every object of that kind (bodies: all but the world)
-            count = {"body": model.nbody, "geom": model.ngeom, "joint": model.njnt,
-                     "actuator": model.nu}[kind]
+            count = {
+                "body": model.nbody,
+                "geom": model.ngeom,
+                "joint": model.njnt,
+                "actuator": model.nu,
+            }[kind]
             self.ids = np.arange(1 if kind == "body" else 0, count, dtype=np.int64)
         elif kind:
-            ids = {"body": sim.body_id, "geom": sim.geom_id, "joint": sim.joint_id,
-                   "actuator": sim.actuator_id}[kind]
+            ids = {
+                "body": sim.body_id,
+                "geom": sim.geom_id,
+                "joint": sim.joint_id,
+                "actuator": sim.actuator_id,
+            }[kind]
             self.ids = np.array([ids(n) for n in p.names], dtype=np.int64)
         else:
             self.ids = np.zeros(0, dtype=np.int64)
@@ -135,7 +156,10 @@ class _Bound:
     def _read(self, sim: MujocoSim) -> dict[str, np.ndarray]:
         m, k = sim.model, self.p.kind
         if k == "mass":
-            return {"mass": m.body_mass[self.ids].copy(), "inertia": m.body_inertia[self.ids].copy()}
+            return {
+                "mass": m.body_mass[self.ids].copy(),
+                "inertia": m.body_inertia[self.ids].copy(),
+            }
         if k == "gravity":
             return {"gravity": m.opt.gravity.copy()}
         if k == "wind":
@@ -262,7 +286,9 @@ class DynamicsRuntime(Disruptor):
 
     def _write(self, sim: MujocoSim) -> None:
         assert self.current is not None
-        lengths = [(b, v) for b, v in zip(self.params, self.current, strict=True) if b.p.kind == "length"]
+        lengths = [
+            (b, v) for b, v in zip(self.params, self.current, strict=True) if b.p.kind == "length"
+        ]
         if lengths:
             for b, v in lengths:
                 b.apply(sim, float(v))

@@ -32,6 +32,7 @@ class ForceDisruptor(DisruptorSpec):
         >>> spec = ForceDisruptor(bodies=("torso",), axes="xz", max_force=5.0)
         >>> advgame.make("Hopper-v5", disruptors=[spec]).action_space("force_adversary").shape
         (2,)
+
     """
 
     kind = "force"
@@ -49,7 +50,9 @@ class ForceDisruptor(DisruptorSpec):
     def __post_init__(self) -> None:
         super().__post_init__()
         if isinstance(self.bodies, str) or not self.bodies:
-            raise ConfigError(f"bodies must be a non-empty sequence of body names, got {self.bodies!r}.")
+            raise ConfigError(
+                f"bodies must be a non-empty sequence of body names, got {self.bodies!r}."
+            )
         for axes in (self.axes, self.torque_axes):
             if any(a not in AXES for a in axes) or len(set(axes)) != len(axes):
                 raise ConfigError(f"axes must be distinct letters from 'xyz', got {axes!r}.")
@@ -73,9 +76,12 @@ class ForceRuntime(AdditiveDisruptor):
         cols = [AXES[a] for a in spec.axes] + [3 + AXES[a] for a in spec.torque_axes]
         self.cols = np.array(cols, dtype=np.int64)
         force = as_budget(spec.max_force, len(spec.bodies), "ForceDisruptor.max_force")
-        per_body = [np.concatenate([np.full(len(spec.axes), f),
-                                    np.full(len(spec.torque_axes), float(spec.max_torque))])
-                    for f in force]
+        per_body = [
+            np.concatenate(
+                [np.full(len(spec.axes), f), np.full(len(spec.torque_axes), float(spec.max_torque))]
+            )
+            for f in force
+        ]
         self.k = len(cols)
         self.hold = spec.schedule.hold
         super().__init__(spec, np.concatenate(per_body), bounded=True)

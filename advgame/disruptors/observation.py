@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -33,6 +33,7 @@ class ObservationDisruptor(DisruptorSpec):
         >>> game = advgame.make("Hopper-v5", disruptors=[ObservationDisruptor(eps=0.075)])
         >>> game.action_space("observation_adversary").shape
         (11,)
+
     """
 
     kind = "observation"
@@ -72,7 +73,9 @@ class ObservationDisruptor(DisruptorSpec):
         for t in targets:
             space = task.observation_spaces[t]
             if not isinstance(space, spaces.Box):
-                raise ConfigError(f"Observation of {t!r} is {space}; only Box observations can be perturbed.")
+                raise ConfigError(
+                    f"Observation of {t!r} is {space}; only Box observations can be perturbed."
+                )
             n = int(np.prod(space.shape))
             idx = np.arange(n) if self.dims is None else np.asarray(self.dims, dtype=np.int64)
             if idx.ndim != 1 or idx.size == 0 or idx.min() < 0 or idx.max() >= n:
@@ -88,17 +91,31 @@ class ObservationRuntime(AdditiveDisruptor):
 
     hook = "observation"
 
-    def __init__(self, spec: ObservationDisruptor, task: TaskBase,
-                 targets: tuple[str, ...], dims: dict[str, np.ndarray]) -> None:
+    def __init__(
+        self,
+        spec: ObservationDisruptor,
+        task: TaskBase,
+        targets: tuple[str, ...],
+        dims: dict[str, np.ndarray],
+    ) -> None:
         self.targets = targets
         self.dims = dims
-        self.full = {t: dims[t].size == int(np.prod(task.observation_spaces[t].shape)) for t in targets}
-        self.eps = {t: as_budget(spec.eps, dims[t].size, "ObservationDisruptor.eps") if spec.bounded
-                    else np.ones(dims[t].size) for t in targets}
+        # build() checked that every target observes a Box
+        self.spaces: dict[str, spaces.Box] = {
+            t: cast(spaces.Box, task.observation_spaces[t]) for t in targets
+        }
+        self.full = {t: dims[t].size == int(np.prod(self.spaces[t].shape)) for t in targets}
+        self.eps = {
+            t: as_budget(spec.eps, dims[t].size, "ObservationDisruptor.eps")
+            if spec.bounded
+            else np.ones(dims[t].size)
+            for t in targets
+        }
         self.scale = {t: np.ones(dims[t].size) for t in targets}
-        self.spaces = {t: task.observation_spaces[t] for t in targets}
-        self.clip_obs = {t: bool(np.isfinite(s.low).any() or np.isfinite(s.high).any())
-                         for t, s in self.spaces.items()}
+        self.clip_obs = {
+            t: bool(np.isfinite(s.low).any() or np.isfinite(s.high).any())
+            for t, s in self.spaces.items()
+        }
         self.timing = spec.timing
         sizes = [dims[t].size for t in targets]
         super().__init__(spec, self._unit(), bounded=spec.bounded, norm=spec.norm, blocks=sizes)
@@ -135,6 +152,8 @@ class ObservationRuntime(AdditiveDisruptor):
             if self.clip_obs[t]:
                 new = np.clip(new, space.low, space.high)
             if new.dtype != space.dtype:
-                new = (np.rint(new) if np.issubdtype(space.dtype, np.integer) else new).astype(space.dtype)
+                new = (np.rint(new) if np.issubdtype(space.dtype, np.integer) else new).astype(
+                    space.dtype
+                )
             observations[t] = new
             i += n

@@ -30,6 +30,7 @@ class RewardDisruptor(DisruptorSpec):
         >>> game = advgame.make("Hopper-v5", disruptors=[RewardDisruptor(eps=0.5)])
         >>> game.action_space("reward_adversary").shape
         (1,)
+
     """
 
     kind = "reward"
