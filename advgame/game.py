@@ -140,7 +140,9 @@ class Game(ParallelEnv):
             d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "stale"
         ]
         self._action_ds, self._reward_ds = by_hook["action"], by_hook["reward"]
-        self._env_ds = by_hook["environment"]
+        self._model_ds = [d for d in by_hook["environment"] if getattr(d, "edits_model", False)]
+        self._data_ds = [d for d in by_hook["environment"] if not getattr(d, "edits_model", False)]
+        self._env_ds = self._model_ds + self._data_ds
         self._act_ds = [*self._env_ds, *self._action_ds, *self._reward_ds, *self._stale]
         self._phase = ""
         self.phase = phase
@@ -338,13 +340,17 @@ class Game(ParallelEnv):
         return obs, rewards, terms, truncs, infos
 
     def _disrupt_environment(self, used: dict[str, np.ndarray]) -> None:
+        # `_env_ds` lists model edits (dynamics, which may recompile the model) before data
+        # edits (forces), so forces land in the data of the model that will step.
         sim = self.task.sim
         epoch = sim.epoch
-        for d in self._env_ds:
+        for d in self._model_ds:
             d.environment(sim, used.get(d.agent))
-        if sim.epoch != epoch:  # a recompiled model dropped edits made before it this step
-            for d in self._env_ds:
+        if sim.epoch != epoch:  # a recompile dropped edits made before it on the old model
+            for d in self._model_ds:
                 d.environment(sim, None)
+        for d in self._data_ds:
+            d.environment(sim, used.get(d.agent))
 
     # -- helpers ----------------------------------------------------------------------------
     def _begin_step(self, obs: dict[str, Any], pending: dict[str, np.ndarray] | None) -> None:
@@ -399,7 +405,12 @@ class Game(ParallelEnv):
             return np.int64(action)
         a = np.asarray(action)
         if a.dtype != space.dtype:
-            a = a.astype(space.dtype)
+            try:
+                a = a.astype(space.dtype)
+            except (TypeError, ValueError):
+                raise ActionError(
+                    f"Action for {agent!r} is not numeric: {action!r} ({space})."
+                ) from None
         if a.shape != space.shape:
             raise ActionError(
                 f"Action for {agent!r} has shape {a.shape}; expected {space.shape} ({space})."

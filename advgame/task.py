@@ -67,7 +67,9 @@ class MujocoSim:
                 raise ConfigError(
                     "This task base has no model file; shape changes are unavailable."
                 )
-            self._spec = mujoco.MjSpec.from_file(self._xml_path)
+            spec = mujoco.MjSpec.from_file(self._xml_path)
+            spec.compile()  # recompile() keeps qpos/qvel only once the spec has been compiled
+            self._spec = spec
         return self._spec
 
     def body_id(self, name: str) -> int:

@@ -103,8 +103,13 @@ def hopper():
             ActionDisruptor(mode="probabilistic", alpha=0.5, name="act_prob"),
             ActionDisruptor(mode="noisy", alpha=0.3, name="act_noisy"),
             ActionDisruptor(bounded=False, name="act_unbounded"),
-            ForceDisruptor(bodies=("torso", "foot"), axes="xz", max_force=FORCE_BOUNDS,
-                           torque_axes="y", max_torque=TORQUE_BOUND),
+            ForceDisruptor(
+                bodies=("torso", "foot"),
+                axes="xz",
+                max_force=FORCE_BOUNDS,
+                torque_axes="y",
+                max_torque=TORQUE_BOUND,
+            ),
             DynamicsDisruptor(params=DYN_PARAMS),
         ],
     )
@@ -134,12 +139,25 @@ def lunar():
 
 
 HOPPER_ADVERSARIES = [
-    "obs_linf", "obs_l2", "obs_norm", "obs_dims", "obs_unbounded", "reward_adversary",
-    "cost_adversary", "reward_unbounded", "act_add", "act_prob", "act_noisy", "act_unbounded",
-    "force_adversary", "dynamics_adversary",
+    "obs_linf",
+    "obs_l2",
+    "obs_norm",
+    "obs_dims",
+    "obs_unbounded",
+    "reward_adversary",
+    "cost_adversary",
+    "reward_unbounded",
+    "act_add",
+    "act_prob",
+    "act_noisy",
+    "act_unbounded",
+    "force_adversary",
+    "dynamics_adversary",
 ]
 LUNAR_ADVERSARIES = ["observation_adversary", "act_discrete"]
-ALL_ADVERSARIES = [("hopper", a) for a in HOPPER_ADVERSARIES] + [("lunar", a) for a in LUNAR_ADVERSARIES]
+ALL_ADVERSARIES = [("hopper", a) for a in HOPPER_ADVERSARIES] + [
+    ("lunar", a) for a in LUNAR_ADVERSARIES
+]
 
 
 def test_module_games_have_the_adversaries_under_test(hopper, lunar):
@@ -175,8 +193,11 @@ def perturb_action(d, a: Any, action: np.ndarray, seed: int = 0) -> tuple[Any, n
 
 # -- observation --------------------------------------------------------------------------------
 @FEW
-@given(eps=hnp.arrays(np.float64, (OBS_N,), elements=st.floats(0.0, 10.0)),
-       obs=finite_vectors(OBS_N), action=adv_actions(OBS_N))
+@given(
+    eps=hnp.arrays(np.float64, (OBS_N,), elements=st.floats(0.0, 10.0)),
+    obs=finite_vectors(OBS_N),
+    action=adv_actions(OBS_N),
+)
 def test_observation_linf_stays_in_per_dimension_ball(hopper, eps, obs, action):
     d = ObservationDisruptor(eps=tuple(eps)).build(hopper.task)
     space = hopper.observation_space(P)
@@ -224,9 +245,12 @@ def test_observation_l2_module_game(hopper, obs, action):
 
 
 @FEW
-@given(eps=st.floats(0.0, 2.0),
-       std=hnp.arrays(np.float64, (OBS_N,), elements=st.floats(1e-3, 100.0)),
-       obs=finite_vectors(OBS_N), action=adv_actions(OBS_N))
+@given(
+    eps=st.floats(0.0, 2.0),
+    std=hnp.arrays(np.float64, (OBS_N,), elements=st.floats(1e-3, 100.0)),
+    obs=finite_vectors(OBS_N),
+    action=adv_actions(OBS_N),
+)
 def test_observation_normalized_budget_scales_with_std(hopper, eps, std, obs, action):
     d = ObservationDisruptor(eps=eps, space="normalized").build(hopper.task)
     d.set_scale(P, std)
@@ -255,9 +279,13 @@ def test_observation_normalized_set_scale_updates_the_module_game_budget(hopper,
 
 
 @FEW
-@given(dims=st.lists(st.integers(0, OBS_N - 1), min_size=1, max_size=OBS_N, unique=True),
-       eps=st.floats(0.0, 5.0), norm=st.sampled_from(["linf", "l2"]), obs=finite_vectors(OBS_N),
-       data=st.data())
+@given(
+    dims=st.lists(st.integers(0, OBS_N - 1), min_size=1, max_size=OBS_N, unique=True),
+    eps=st.floats(0.0, 5.0),
+    norm=st.sampled_from(["linf", "l2"]),
+    obs=finite_vectors(OBS_N),
+    data=st.data(),
+)
 def test_observation_dims_subset_leaves_other_dims_alone(hopper, dims, eps, norm, obs, data):
     dims = sorted(dims)
     d = ObservationDisruptor(eps=eps, dims=dims, norm=norm).build(hopper.task)
@@ -305,9 +333,13 @@ def test_observation_is_clipped_into_a_bounded_space(lunar, eps, data):
 
 
 @FEW
-@given(obs=finite_vectors(OBS_N, 1e6), action=adv_actions(OBS_N),
-       norm=st.sampled_from(["linf", "l2"]), space=st.sampled_from(["raw", "normalized"]),
-       vector=st.booleans())
+@given(
+    obs=finite_vectors(OBS_N, 1e6),
+    action=adv_actions(OBS_N),
+    norm=st.sampled_from(["linf", "l2"]),
+    space=st.sampled_from(["raw", "normalized"]),
+    vector=st.booleans(),
+)
 def test_observation_zero_budget_is_identity(hopper, obs, action, norm, space, vector):
     eps = (0.0,) * OBS_N if vector else 0.0
     d = ObservationDisruptor(eps=eps, norm=norm, space=space).build(hopper.task)
@@ -320,15 +352,21 @@ def test_observation_zero_budget_is_identity(hopper, obs, action, norm, space, v
 
 # -- reward and cost ----------------------------------------------------------------------------
 @FEW
-@given(eps=st.floats(0.0, 100.0), signal=st.sampled_from(["reward", "cost"]),
-       r=st.floats(-1e3, 1e3), c=st.floats(0.0, 1e3), action=adv_actions(1))
+@given(
+    eps=st.floats(0.0, 100.0),
+    signal=st.sampled_from(["reward", "cost"]),
+    r=st.floats(-1e3, 1e3),
+    c=st.floats(0.0, 1e3),
+    action=adv_actions(1),
+)
 def test_reward_and_cost_change_is_bounded(hopper, eps, signal, r, c, action):
     d = RewardDisruptor(eps=eps, signal=signal).build(hopper.task)
     assert d.agent == f"{signal}_adversary"
     new_r, new_c, n = perturb_reward(d, r, c, action)
     assert n == expected_clips(action)
     changed, other, before, before_other = (
-        (new_r, new_c, r, c) if signal == "reward" else (new_c, new_r, c, r))
+        (new_r, new_c, r, c) if signal == "reward" else (new_c, new_r, c, r)
+    )
     assert other == before_other  # the other signal is never touched
     assert abs(changed - before) <= eps + ulp_tol(before, eps)
     if n == 0:
@@ -443,8 +481,12 @@ def test_action_noisy_and_probabilistic_module_game(hopper, data):
 
 
 @FEW
-@given(k=st.integers(0, 3), alpha=st.sampled_from([0.0, 0.3, 1.0]), seed=st.integers(0, 2**32 - 1),
-       action=adv_actions(4))
+@given(
+    k=st.integers(0, 3),
+    alpha=st.sampled_from([0.0, 0.3, 1.0]),
+    seed=st.integers(0, 2**32 - 1),
+    action=adv_actions(4),
+)
 def test_action_discrete_lunar_lander(lunar, k, alpha, seed, action):
     space = lunar.action_space(P)
     assert isinstance(space, spaces.Discrete) and space.n == 4
@@ -480,9 +522,12 @@ def test_action_zero_budget_is_identity(hopper, data):
     space = hopper.action_space(P)
     a = data.draw(box_actions(space))
     action = data.draw(adv_actions(ACT_N))
-    for spec in (ActionDisruptor(eps=0.0), ActionDisruptor(eps=(0.0, 0.0, 0.0)),
-                 ActionDisruptor(mode="noisy", alpha=0.0),
-                 ActionDisruptor(mode="probabilistic", alpha=0.0)):
+    for spec in (
+        ActionDisruptor(eps=0.0),
+        ActionDisruptor(eps=(0.0, 0.0, 0.0)),
+        ActionDisruptor(mode="noisy", alpha=0.0),
+        ActionDisruptor(mode="probabilistic", alpha=0.0),
+    ):
         new, _, _ = perturb_action(spec.build(hopper.task), a, action)
         assert np.array_equal(new, a), spec
 
@@ -504,7 +549,10 @@ def test_force_stays_within_bounds(hopper, action):
     d.environment(sim, u)
     xfrc = sim.data.xfrc_applied.copy()
     torso, foot = sim.body_id("torso"), sim.body_id("foot")
-    for body, bound, part in ((torso, FORCE_BOUNDS[0], action[:3]), (foot, FORCE_BOUNDS[1], action[3:])):
+    for body, bound, part in (
+        (torso, FORCE_BOUNDS[0], action[:3]),
+        (foot, FORCE_BOUNDS[1], action[3:]),
+    ):
         force = xfrc[body, [0, 2]]
         assert np.all(np.abs(force) <= bound)
         assert abs(xfrc[body, 4]) <= TORQUE_BOUND
@@ -534,10 +582,14 @@ def test_force_zero_budget_is_identity(hopper, action):
 def model_snapshot(sim) -> dict[str, np.ndarray]:
     m = sim.model
     return {
-        "body_mass": m.body_mass.copy(), "body_inertia": m.body_inertia.copy(),
-        "gravity": m.opt.gravity.copy(), "wind": m.opt.wind.copy(),
-        "density": np.array(m.opt.density), "geom_friction": m.geom_friction.copy(),
-        "dof_damping": m.dof_damping.copy(), "actuator_gear": m.actuator_gear.copy(),
+        "body_mass": m.body_mass.copy(),
+        "body_inertia": m.body_inertia.copy(),
+        "gravity": m.opt.gravity.copy(),
+        "wind": m.opt.wind.copy(),
+        "density": np.array(m.opt.density),
+        "geom_friction": m.geom_friction.copy(),
+        "dof_damping": m.dof_damping.copy(),
+        "actuator_gear": m.actuator_gear.copy(),
     }
 
 
@@ -580,8 +632,10 @@ def test_dynamics_values_stay_in_their_intervals(hopper, action):
         assert np.all(m.dof_damping == damping)
         gear_ratio = m.actuator_gear[:, 0] / nominal["actuator_gear"][:, 0]
         assert np.all((gear_ratio >= 0.5 - 1e-12) & (gear_ratio <= 1.5 + 1e-12))
+        assert np.array_equal(m.actuator_gear[:, 0], nominal["actuator_gear"][:, 0] * gear)
         assert -3.0 <= m.opt.wind[0] <= 3.0 and m.opt.wind[0] == wind
-        assert m.opt.density == DYN_PARAMS[-1].air_density
+        # the medium is air while the wind blows, nominal (vacuum) when it is still
+        assert m.opt.density == (DYN_PARAMS[-1].air_density if wind != 0.0 else 0.0)
     finally:
         d.restore(sim)
     assert_snapshot_equal(model_snapshot(sim), nominal)
@@ -740,8 +794,9 @@ def test_roundtrip_actions(hopper, frac, target):
         abar = space.low + (target + 1) / 2 * (space.high - space.low)
         u, n = d.decode(d.encode(abar))
         assert n == 0
-        np.testing.assert_allclose(space.low + (u + 1) / 2 * (space.high - space.low), abar,
-                                   rtol=0, atol=1e-6)
+        np.testing.assert_allclose(
+            space.low + (u + 1) / 2 * (space.high - space.low), abar, rtol=0, atol=1e-6
+        )
 
 
 @pytest.mark.parametrize("k", range(4))
@@ -756,7 +811,9 @@ def test_roundtrip_discrete_choice(lunar, k):
 @given(frac=in_range_actions(6))
 def test_roundtrip_force(hopper, frac):
     d = hopper.disruptors["force_adversary"]
-    bounds = np.array([*([FORCE_BOUNDS[0]] * 2), TORQUE_BOUND, *([FORCE_BOUNDS[1]] * 2), TORQUE_BOUND])
+    bounds = np.array(
+        [*([FORCE_BOUNDS[0]] * 2), TORQUE_BOUND, *([FORCE_BOUNDS[1]] * 2), TORQUE_BOUND]
+    )
     v = bounds * frac
     u, n = d.decode(d.encode(v))
     assert n == 0
@@ -838,8 +895,11 @@ def _fillers(game) -> dict[str, Any]:
 def test_game_step_clips_extreme_actions_and_reports_counts(hopper_game, magnitude, data):
     game = hopper_game
     sim = game.task.sim
-    signs = {a: np.array(data.draw(st.lists(st.sampled_from([-1.0, 1.0]), min_size=n, max_size=n)))
-             for a in game.adversaries for n in [game.action_space(a).shape[0]]}
+    signs = {
+        a: np.array(data.draw(st.lists(st.sampled_from([-1.0, 1.0]), min_size=n, max_size=n)))
+        for a in game.adversaries
+        for n in [game.action_space(a).shape[0]]
+    }
     obs, _ = game.reset(seed=data.draw(st.integers(0, 1000)))
     # Sense move: the observation adversary sees s_t and shows s_t + δ_t.
     assert game.next_movers == {"observation_adversary"}
@@ -856,8 +916,13 @@ def test_game_step_clips_extreme_actions_and_reports_counts(hopper_game, magnitu
     for a in game.adversaries:
         actions[a] = (signs[a] * magnitude).astype(np.float64)
     obs, rewards, _, _, infos = game.step(actions)
-    for a in ("reward_adversary", "cost_adversary", "action_adversary", "force_adversary",
-              "dynamics_adversary"):
+    for a in (
+        "reward_adversary",
+        "cost_adversary",
+        "action_adversary",
+        "force_adversary",
+        "dynamics_adversary",
+    ):
         assert infos[a]["acted"] is True
         assert infos[a]["clipped"] == game.action_space(a).shape[0], a
     assert infos["observation_adversary"]["acted"] is False
@@ -865,10 +930,13 @@ def test_game_step_clips_extreme_actions_and_reports_counts(hopper_game, magnitu
     assert rewards[P] - info["true_reward"] == pytest.approx(0.2 * signs["reward_adversary"][0])
     assert info["cost"] - info["true_cost"] == pytest.approx(0.3 * signs["cost_adversary"][0])
     # The protagonist's action reached the simulator as clip(a + 0.1 s) (MuJoCo's data.ctrl).
-    np.testing.assert_allclose(sim.data.ctrl, np.clip(a0 + 0.1 * signs["action_adversary"], -1, 1),
-                               rtol=0, atol=1e-6)
+    np.testing.assert_allclose(
+        sim.data.ctrl, np.clip(a0 + 0.1 * signs["action_adversary"], -1, 1), rtol=0, atol=1e-6
+    )
     torso = sim.body_id("torso")
-    np.testing.assert_array_equal(sim.data.xfrc_applied[torso, [0, 2]], 2.0 * signs["force_adversary"])
+    np.testing.assert_array_equal(
+        sim.data.xfrc_applied[torso, [0, 2]], 2.0 * signs["force_adversary"]
+    )
     expected_g = 19.62 if signs["dynamics_adversary"][0] > 0 else 9.81
     assert -sim.model.opt.gravity[2] == pytest.approx(expected_g, rel=1e-12)
     # Adversaries are paid the negative of the true payoff, not of the perturbed reward.
@@ -876,8 +944,17 @@ def test_game_step_clips_extreme_actions_and_reports_counts(hopper_game, magnitu
         assert rewards[a] == -info["payoff"] == -info["true_reward"]
 
 
-@pytest.mark.parametrize("agent", ["reward_adversary", "cost_adversary", "action_adversary",
-                                   "force_adversary", "dynamics_adversary", "observation_adversary"])
+@pytest.mark.parametrize(
+    "agent",
+    [
+        "reward_adversary",
+        "cost_adversary",
+        "action_adversary",
+        "force_adversary",
+        "dynamics_adversary",
+        "observation_adversary",
+    ],
+)
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_game_step_rejects_non_finite_adversary_actions(hopper_game, agent, bad):
     game = hopper_game
@@ -892,7 +969,9 @@ def test_game_step_rejects_non_finite_adversary_actions(hopper_game, agent, bad)
     assert repr(agent) in str(err.value)
 
 
-@pytest.mark.parametrize("agent", ["observation_adversary", "action_adversary", "dynamics_adversary"])
+@pytest.mark.parametrize(
+    "agent", ["observation_adversary", "action_adversary", "dynamics_adversary"]
+)
 def test_game_step_rejects_wrong_shape_adversary_actions(hopper_game, agent):
     game = hopper_game
     game.reset(seed=3)
@@ -905,8 +984,10 @@ def test_game_step_rejects_wrong_shape_adversary_actions(hopper_game, agent):
 
 
 def test_game_step_unbounded_adversary_reports_no_clips():
-    game = advgame.make("Hopper-v5", disruptors=[ObservationDisruptor(bounded=False),
-                                                 RewardDisruptor(bounded=False)])
+    game = advgame.make(
+        "Hopper-v5",
+        disruptors=[ObservationDisruptor(bounded=False), RewardDisruptor(bounded=False)],
+    )
     try:
         game.reset(seed=0)
         state = np.array(game.state())

@@ -22,9 +22,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from advgame.adversaries import SinusoidAdversary
 
 import advgame
-from advgame.adversaries import SinusoidAdversary
 from advgame.disruptors import DynamicsDisruptor, ForceDisruptor, Param
 from advgame.rollout import rollout
 from advgame.schedule import Schedule
@@ -112,35 +112,84 @@ def _check_length(full: float, nominal_full: float):
         # The capsule was rebuilt, so its mass follows its length (a longer capsule is heavier).
         t = _torso(sim)
         assert (sim.model.body_mass[t] > nom["body_mass"][t]) == (full > nominal_full)
+
     return check
 
 
 CASES = {
-    "mass": Case("Hopper-v5", Param("mass", 0.5, 3.0, names=("torso",), relative=True), 1.0,
-                 Param("mass", 1.0, 1.0, names=("torso",), relative=True), 1,
-                 frozenset({"body_mass", "body_inertia"}), _check_mass),
-    "gravity": Case("Hopper-v5", Param("gravity", 9.81, 19.62), 1.0,
-                    Param("gravity", 9.81, 9.81), 1, frozenset({"gravity"}), _check_gravity),
-    "wind": Case("Hopper-v5", Param("wind", 0.0, 10.0), 1.0, Param("wind", 0.0, 0.0), 1,
-                 frozenset({"wind", "density"}), _check_wind),
+    "mass": Case(
+        "Hopper-v5",
+        Param("mass", 0.5, 3.0, names=("torso",), relative=True),
+        1.0,
+        Param("mass", 1.0, 1.0, names=("torso",), relative=True),
+        1,
+        frozenset({"body_mass", "body_inertia"}),
+        _check_mass,
+    ),
+    "gravity": Case(
+        "Hopper-v5",
+        Param("gravity", 9.81, 19.62),
+        1.0,
+        Param("gravity", 9.81, 9.81),
+        1,
+        frozenset({"gravity"}),
+        _check_gravity,
+    ),
+    "wind": Case(
+        "Hopper-v5",
+        Param("wind", 0.0, 10.0),
+        1.0,
+        Param("wind", 0.0, 0.0),
+        1,
+        frozenset({"wind", "density"}),
+        _check_wind,
+    ),
     # Friction acts only through contacts; Hopper's foot first touches the floor ~8 steps in.
-    "friction": Case("Hopper-v5", Param("friction", 0.05, 1.0), -1.0,
-                     Param("friction", 1.0, 1.0, relative=True), 15,
-                     frozenset({"geom_friction"}), _check_friction),
-    "damping": Case("Hopper-v5", Param("damping", 1.0, 10.0, relative=True), 1.0,
-                    Param("damping", 1.0, 1.0, relative=True), 1,
-                    frozenset({"dof_damping"}), _check_damping),
-    "gear": Case("Hopper-v5", Param("gear", 0.5, 1.5, relative=True), 1.0,
-                 Param("gear", 1.0, 1.0, relative=True), 1,
-                 frozenset({"actuator_gear"}), _check_gear),
-    "length-hopper": Case("Hopper-v5", Param("length", 0.3, 0.5, names=("torso",)), 1.0,
-                          Param("length", 0.4, 0.4, names=("torso",)), 1,
-                          frozenset({"geom_size", "body_mass", "body_inertia"}),
-                          _check_length(0.5, 0.4)),
-    "length-walker": Case("Walker2d-v5", Param("length", 0.2, 0.6, names=("torso",)), -1.0,
-                          Param("length", 0.4, 0.4, names=("torso",)), 1,
-                          frozenset({"geom_size", "body_mass", "body_inertia"}),
-                          _check_length(0.2, 0.4)),
+    "friction": Case(
+        "Hopper-v5",
+        Param("friction", 0.05, 1.0),
+        -1.0,
+        Param("friction", 1.0, 1.0, relative=True),
+        15,
+        frozenset({"geom_friction"}),
+        _check_friction,
+    ),
+    "damping": Case(
+        "Hopper-v5",
+        Param("damping", 1.0, 10.0, relative=True),
+        1.0,
+        Param("damping", 1.0, 1.0, relative=True),
+        1,
+        frozenset({"dof_damping"}),
+        _check_damping,
+    ),
+    "gear": Case(
+        "Hopper-v5",
+        Param("gear", 0.5, 1.5, relative=True),
+        1.0,
+        Param("gear", 1.0, 1.0, relative=True),
+        1,
+        frozenset({"actuator_gear"}),
+        _check_gear,
+    ),
+    "length-hopper": Case(
+        "Hopper-v5",
+        Param("length", 0.3, 0.5, names=("torso",)),
+        1.0,
+        Param("length", 0.4, 0.4, names=("torso",)),
+        1,
+        frozenset({"geom_size", "body_mass", "body_inertia"}),
+        _check_length(0.5, 0.4),
+    ),
+    "length-walker": Case(
+        "Walker2d-v5",
+        Param("length", 0.2, 0.6, names=("torso",)),
+        -1.0,
+        Param("length", 0.4, 0.4, names=("torso",)),
+        1,
+        frozenset({"geom_size", "body_mass", "body_inertia"}),
+        _check_length(0.2, 0.4),
+    ),
 }
 
 
@@ -155,8 +204,13 @@ def protagonist_actions(game, n: int, seed: int, scale: float = 1.0) -> list[np.
     return [(scale * rng.uniform(space.low, space.high)).astype(space.dtype) for _ in range(n)]
 
 
-def play(game, seed: int, actions: list[np.ndarray], adversary: float,
-         on_step: Callable[[Any], None] | None = None) -> list[np.ndarray]:
+def play(
+    game,
+    seed: int,
+    actions: list[np.ndarray],
+    adversary: float,
+    on_step: Callable[[Any], None] | None = None,
+) -> list[np.ndarray]:
     """Reset with `seed` and play the protagonist actions; return the observations after each."""
     game.reset(seed=seed)
     out = []
@@ -242,8 +296,29 @@ def test_zero_width_interval_at_nominal_plays_the_plain_task(kind):
             assert len(got) == len(want), f"episode {episode}: episode lengths differ"
             atol = 1e-9 if case.shift.kind == "length" else 0.0
             for t, (g, w) in enumerate(zip(got, want, strict=True)):
-                np.testing.assert_allclose(g, w, rtol=0, atol=atol,
-                                           err_msg=f"{kind}: episode {episode}, step {t}")
+                np.testing.assert_allclose(
+                    g, w, rtol=0, atol=atol, err_msg=f"{kind}: episode {episode}, step {t}"
+                )
+    finally:
+        game.close()
+
+
+@pytest.mark.parametrize("kind", ["length-hopper", "length-walker"])
+def test_length_shift_is_reproducible_across_episodes(kind):
+    """Same seed, same actions, same length shift: the same trajectory in every episode.
+
+    A length shift recompiles the model during the step; the simulation must carry on from the
+    seeded initial state in the first episode exactly as in later ones (design invariant 5).
+    """
+    case = CASES[kind]
+    game = make_game(case.env_id, case.shift)
+    try:
+        actions = protagonist_actions(game, 10, seed=5, scale=0.3)
+        episodes = [play(game, 9, actions, case.end) for _ in range(3)]
+        for later in episodes[1:]:
+            assert len(later) == len(episodes[0])
+            for t, (a, b) in enumerate(zip(episodes[0], later, strict=True)):
+                np.testing.assert_array_equal(a, b, err_msg=f"{kind}: step {t}")
     finally:
         game.close()
 
@@ -264,11 +339,16 @@ def test_reset_restores_the_nominal_model_exactly(kind):
             assert not changed_keys(before, model_snapshot(sim)), f"episode {episode} began shifted"
             for t in range(4):
                 u = rng.uniform(-1, 1) if adversary is None else adversary
-                game.step({P: np.zeros(game.action_space(P).shape, np.float32),
-                           DYN: np.array([u], dtype=np.float32)})
+                game.step(
+                    {
+                        P: np.zeros(game.action_space(P).shape, np.float32),
+                        DYN: np.array([u], dtype=np.float32),
+                    }
+                )
                 if t == 0:
-                    assert changed_keys(before, model_snapshot(sim)) & case.touches, \
+                    assert changed_keys(before, model_snapshot(sim)) & case.touches, (
                         "the shift did not reach the model: this test would prove nothing"
+                    )
             game.reset()
             after = model_snapshot(sim)
             assert not changed_keys(before, after), changed_keys(before, after)
@@ -280,13 +360,18 @@ def test_reset_restores_the_nominal_model_exactly(kind):
 
 @pytest.mark.parametrize(
     ("param", "key"),
-    [(Param("gravity", 9.81, 19.62), "gravity"),
-     (Param("mass", 1.0, 2.0, relative=True), "body_mass"),
-     (Param("friction", 0.5, 1.5, relative=True), "geom_friction")],
+    [
+        (Param("gravity", 9.81, 19.62), "gravity"),
+        (Param("mass", 1.0, 2.0, relative=True), "body_mass"),
+        (Param("friction", 0.5, 1.5, relative=True), "geom_friction"),
+    ],
     ids=["gravity", "mass", "friction"],
 )
-@pytest.mark.parametrize("schedule", [Schedule(persist=True), Schedule.per_episode(persist=True)],
-                         ids=["every-step", "per-episode"])
+@pytest.mark.parametrize(
+    "schedule",
+    [Schedule(persist=True), Schedule.per_episode(persist=True)],
+    ids=["every-step", "per-episode"],
+)
 def test_persistent_schedule_keeps_the_shift_across_reset(param, key, schedule):
     game = make_game("Hopper-v5", param, schedule)
     try:
@@ -338,7 +423,9 @@ def test_per_episode_schedule_acts_only_at_t0_and_holds_for_the_episode():
 
 
 def test_force_writes_xfrc_applied_and_a_skipped_step_clears_it():
-    spec = ForceDisruptor(bodies=("torso",), axes="xz", max_force=20.0, schedule=Schedule.every_n(2))
+    spec = ForceDisruptor(
+        bodies=("torso",), axes="xz", max_force=20.0, schedule=Schedule.every_n(2)
+    )
     game = advgame.make("Hopper-v5", disruptors=[spec])
     sim = game.task.sim
     try:
@@ -368,8 +455,9 @@ def test_force_writes_xfrc_applied_and_a_skipped_step_clears_it():
 
 
 def test_held_force_stays_on_skipped_steps():
-    spec = ForceDisruptor(bodies=("torso",), axes="xz", max_force=20.0,
-                          schedule=Schedule(every=2, hold=True))
+    spec = ForceDisruptor(
+        bodies=("torso",), axes="xz", max_force=20.0, schedule=Schedule(every=2, hold=True)
+    )
     game = advgame.make("Hopper-v5", disruptors=[spec])
     sim = game.task.sim
     try:
@@ -397,10 +485,13 @@ def test_force_pushes_the_body():
 
 def test_force_survives_a_length_recompile_on_the_same_step():
     """A length shift recompiles the model on the step; the force of that step must still act."""
-    game = advgame.make("Hopper-v5", disruptors=[
-        ForceDisruptor(bodies=("torso",), axes="xz", max_force=20.0),
-        DynamicsDisruptor(params=[Param("length", 0.3, 0.5, names=("torso",))]),
-    ])
+    game = advgame.make(
+        "Hopper-v5",
+        disruptors=[
+            ForceDisruptor(bodies=("torso",), axes="xz", max_force=20.0),
+            DynamicsDisruptor(params=[Param("length", 0.3, 0.5, names=("torso",))]),
+        ],
+    )
     sim = game.task.sim
     try:
         game.reset(seed=0)
@@ -425,7 +516,8 @@ def test_sinusoid_preset_sets_gravity_per_episode_on_ant():
             episode[0] += 1
         m = sim.model
         seen.setdefault(episode[0], []).append(
-            (game.t, -float(m.opt.gravity[2]), float(m.opt.wind[0]), float(m.opt.density)))
+            (game.t, -float(m.opt.gravity[2]), float(m.opt.wind[0]), float(m.opt.density))
+        )
         return np.zeros(game.action_space(P).shape, dtype=np.float32)
 
     try:

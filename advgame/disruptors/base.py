@@ -160,7 +160,12 @@ class Disruptor(abc.ABC):
             ActionError: wrong shape, or NaN/inf in the action.
 
         """
-        u = np.asarray(action, dtype=np.float64)
+        try:
+            u = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ActionError(
+                f"Action for {self.agent!r} is not numeric: {action!r}; expected {self.action_space}."
+            ) from None
         if u.shape != self.shape:
             raise ActionError(
                 f"Action for {self.agent!r} has shape {u.shape}; expected {self.shape} "

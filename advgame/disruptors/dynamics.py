@@ -61,8 +61,8 @@ class Param:
     relative: bool = False
     """Interpret `low`/`high` as factors of each target's nominal value."""
     air_density: float = 1.2
-    """``wind`` only: the medium density (kg/m³) set while the wind blows; MuJoCo's default is 0,
-    a vacuum in which wind has no effect."""
+    """``wind`` only: the medium density (kg/m³) set while the wind blows (value ≠ nominal);
+    MuJoCo's default is 0, a vacuum in which wind has no effect."""
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -196,7 +196,8 @@ class _Bound:
             m.opt.gravity[2] = -float(target[0])
         elif k == "wind":
             m.opt.wind[0] = float(target[0])
-            m.opt.density = float(self.p.air_density)
+            still = float(target[0]) == float(nom["wind"][0])
+            m.opt.density = float(nom["density"][0]) if still else float(self.p.air_density)
         elif k == "friction":
             m.geom_friction[self.ids, 0] = target
         elif k == "damping":
@@ -249,18 +250,29 @@ class DynamicsRuntime(Disruptor):
     """`DynamicsDisruptor` bound to a MuJoCo model."""
 
     hook = "environment"
+    edits_model = True
+    """It changes the model (and may recompile it), so the game applies it before data edits."""
 
     def __init__(self, spec: DynamicsDisruptor, sim: MujocoSim) -> None:
         self.params = [_Bound(p, sim) for p in spec.params]
         self.low = np.array([p.low for p in spec.params], dtype=np.float64)
         self.high = np.array([p.high for p in spec.params], dtype=np.float64)
+        self.nominal_values = np.array([self._nominal(b) for b in self.params])
+        """Each parameter's nominal value in its own units (NaN where targets differ)."""
         self.current: np.ndarray | None = None
         self._epoch = sim.epoch
         super().__init__(spec, len(self.params), bounded=True)
 
     def values(self, u: np.ndarray) -> np.ndarray:
-        """Parameter values for a (decoded) action."""
-        return self.low + (u + 1.0) * 0.5 * (self.high - self.low)
+        """Parameter values for a (decoded) action.
+
+        A value within float32 resolution of the nominal one is the nominal value exactly, so
+        the no-op action (a float32) reproduces the nominal model bit for bit.
+        """
+        v = self.low + (u + 1.0) * 0.5 * (self.high - self.low)
+        nom = self.nominal_values
+        close = np.abs(v - nom) <= 1e-6 * np.maximum(1.0, np.abs(nom))  # False where nom is NaN
+        return np.where(close, nom, v)
 
     def encode(self, value: Any) -> np.ndarray:
         """Parameter values (absolute, or factors if relative) -> adversary action."""
@@ -275,6 +287,13 @@ class DynamicsRuntime(Disruptor):
         """The action nearest the nominal model (exactly nominal when it lies in the interval)."""
         nominal = [1.0 if b.p.relative else float(b.reference()[0]) for b in self.params]
         return np.clip(self.encode(nominal), -1.0, 1.0)
+
+    @staticmethod
+    def _nominal(b: _Bound) -> float:
+        if b.p.relative:
+            return 1.0
+        ref = b.reference()
+        return float(ref[0]) if ref.size and np.all(ref == ref[0]) else float("nan")
 
     def environment(self, sim: MujocoSim, u: np.ndarray | None) -> None:
         """Set the parameters on an active step; re-apply them if the model was recompiled."""

@@ -84,17 +84,21 @@ class ForceRuntime(AdditiveDisruptor):
         ]
         self.k = len(cols)
         self.hold = spec.schedule.hold
+        self.wrench: np.ndarray | None = None
         super().__init__(spec, np.concatenate(per_body), bounded=True)
 
     def environment(self, sim: MujocoSim, u: np.ndarray | None) -> None:
         """Write the forces into ``xfrc_applied`` (zero them on a skipped, unheld step)."""
-        if u is None:
-            if not self.hold:
-                self.restore(sim)
-            return
-        wrench = self.perturbation(u).reshape(len(self.ids), self.k)
-        sim.data.xfrc_applied[np.ix_(self.ids, self.cols)] = wrench
+        if u is not None:
+            self.wrench = self.perturbation(u).reshape(len(self.ids), self.k)
+        elif not self.hold:
+            self.wrench = None
+        # rewritten every step: a recompiled model brings fresh data without the forces
+        sim.data.xfrc_applied[np.ix_(self.ids, self.cols)] = (
+            0.0 if self.wrench is None else self.wrench
+        )
 
     def restore(self, sim: MujocoSim) -> None:
         """Remove the forces this disruptor applies."""
+        self.wrench = None
         sim.data.xfrc_applied[np.ix_(self.ids, self.cols)] = 0.0

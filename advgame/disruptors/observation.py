@@ -132,6 +132,12 @@ class ObservationRuntime(AdditiveDisruptor):
         if self.spec.space != "normalized":  # type: ignore[attr-defined]
             raise ConfigError("set_scale applies only to ObservationDisruptor(space='normalized').")
         std = np.asarray(std, dtype=np.float64).reshape(-1)
+        n = int(np.prod(self.spaces[target].shape))
+        if std.shape != (n,) or not np.all(np.isfinite(std)) or np.any(std <= 0):
+            raise BudgetError(
+                f"set_scale needs {n} finite positive stds for {target!r}, got shape {std.shape} "
+                f"with min {std.min() if std.size else None}."
+            )
         self.scale[target] = std[self.dims[target]]
         self.unit = self._unit()
 
