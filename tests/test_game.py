@@ -164,6 +164,8 @@ def _play(
 ) -> list[tuple[int, str, frozenset, dict]]:
     """Play one episode; return (t, move, next_movers, infos) of every move."""
     game.reset(seed=seed)
+    for i, agent in enumerate(game.adversaries):  # reproducible .sample() for adversaries
+        game.action_space(agent).seed(seed + i)
     log = []
     while game.agents:
         t, move, movers = game.t, game.move, game.next_movers
@@ -580,13 +582,13 @@ def test_bad_observation_adversary_action_on_the_sense_move(game: advgame.Game, 
     _raises(lambda: game.step(fillers(game, **{OBS: value})), ActionError, repr(OBS))
 
 
-def test_bad_discrete_protagonist_action() -> None:
+@pytest.mark.parametrize("bad", [7, 1.5, -1, [1], None, "left", math.nan, math.inf])
+def test_bad_discrete_protagonist_action(bad: Any) -> None:
     game = advgame.make("LunarLander-v3")
     game.reset(seed=0)
     game.step(fillers(game))  # the default preset's observation adversary senses first
     assert game.next_movers == {P, ACT}  # then the probabilistic action adversary acts
-    for bad in (7, 1.5, -1):
-        _raises(lambda b=bad: game.step(fillers(game, **{P: b})), ActionError, repr(P), repr(bad))
+    _raises(lambda: game.step(fillers(game, **{P: bad})), ActionError, repr(P), repr(bad))
 
 
 def test_rejected_step_leaves_the_game_unchanged() -> None:
