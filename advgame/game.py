@@ -393,11 +393,11 @@ class Game(ParallelEnv):
     def _protagonist_action(self, agent: str, action: Any) -> Any:
         space = self._act_spaces[agent]
         if isinstance(space, spaces.Discrete):
-            ok = (
-                np.ndim(action) == 0
-                and float(action) == int(action)
-                and space.contains(np.int64(action))
-            )
+            try:
+                ok = np.ndim(action) == 0 and float(action) == int(action)
+                ok = ok and space.contains(np.int64(action))
+            except (TypeError, ValueError, OverflowError):  # None, "left", nan, inf
+                ok = False
             if not ok:
                 raise ActionError(
                     f"Action for {agent!r} must be an int in {space}, got {action!r}."
@@ -415,7 +415,8 @@ class Game(ParallelEnv):
             raise ActionError(
                 f"Action for {agent!r} has shape {a.shape}; expected {space.shape} ({space})."
             )
-        if not math.isfinite(a.dot(a)) and not np.isfinite(a).all():  # dot: one cheap pass
+        flat = a.reshape(-1)
+        if not math.isfinite(flat.dot(flat)) and not np.isfinite(a).all():  # dot: one cheap pass
             raise ActionError(f"Action for {agent!r} contains NaN or inf: {a}.")
         return a
 
