@@ -11,6 +11,7 @@ if __name__ != "advgame.scenarios":  # pragma: no cover - packaging guard
     )
 
 from advgame.registry import ScenarioSpec, register
+from advgame.scenarios.mamujoco_list import register_all as _register_mamujoco
 
 _MUJOCO = "advgame.scenarios.mujoco"
 _BOX2D = "advgame.scenarios.box2d"
@@ -46,3 +47,5 @@ _gym("BipedalWalker-v3", "box2d", _BOX2D, "2D biped over rough terrain")
 _gym("CarRacing-v3", "box2d", _BOX2D, "top-down racing from 96x96 pixels")
 _gym("LunarLander-v3", "box2d", _BOX2D, "lander with four discrete engine actions")
 _gym("LunarLanderContinuous-v3", "box2d", _BOX2D, "lander with continuous throttles")
+# MaMuJoCo (gymnasium-robotics): one registry line per factorization, in mamujoco_list.py.
+_register_mamujoco()

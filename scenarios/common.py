@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from advgame.adversaries import GaussianAdversary, UniformAdversary
-
 from advgame.disruptors import ActionDisruptor, ObservationDisruptor, RewardDisruptor
 from advgame.registry import Preset
 from advgame.schedule import Schedule

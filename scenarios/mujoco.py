@@ -20,8 +20,6 @@ Presets of every MuJoCo scenario:
 from __future__ import annotations
 
 from advgame.adversaries import ConstantAdversary, SinusoidAdversary, UniformAdversary
-from advgame.scenarios.common import gaussian_presets, make_task
-
 from advgame.disruptors import (
     ActionDisruptor,
     DynamicsDisruptor,
@@ -31,9 +29,10 @@ from advgame.disruptors import (
     RewardDisruptor,
 )
 from advgame.registry import Preset
+from advgame.scenarios.common import gaussian_presets, make_task
 from advgame.schedule import Schedule
 
-__all__ = ["ATLA_EPS", "FORCES", "make_task", "presets"]
+__all__ = ["ATLA_EPS", "FORCES", "dynamics_shift", "make_task", "presets"]
 
 FORCES: dict[str, tuple[tuple[str, ...], str, float]] = {
     "Ant-v5": (("torso",), "xyz", 5.0),
@@ -101,7 +100,8 @@ def _force(env_id: str, scale: float = 1.0) -> ForceDisruptor:
     return ForceDisruptor(bodies=bodies, axes=axes, max_force=bound * scale)
 
 
-def _dynamics_20pct() -> DynamicsDisruptor:
+def dynamics_shift() -> DynamicsDisruptor:
+    """A per-episode shift of mass, gravity, friction, damping and gear within ±20 % of nominal."""
     params = tuple(
         Param(k, 0.8, 1.2, relative=True)
         for k in ("mass", "gravity", "friction", "damping", "gear")
@@ -144,7 +144,7 @@ def presets(env_id: str) -> dict[str, Preset]:
                 ObservationDisruptor(eps=0.1),
                 RewardDisruptor(eps=0.1),
                 ActionDisruptor(eps=0.1),
-                _dynamics_20pct(),
+                dynamics_shift(),
                 _force(env_id),
             ),
             description="every disruptor kind: observation, reward, action, dynamics, force",

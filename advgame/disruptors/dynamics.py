@@ -147,8 +147,8 @@ class _Bound:
             self.ids = np.array([ids(n) for n in p.names], dtype=np.int64)
         else:
             self.ids = np.zeros(0, dtype=np.int64)
-        if p.kind == "damping":
-            self.ids = np.array([model.jnt_dofadr[j] for j in self.ids], dtype=np.int64)
+        if p.kind == "damping":  # every degree of freedom of the joints (ball: 3, free: 6)
+            self.ids = np.nonzero(np.isin(model.dof_jntid, self.ids))[0].astype(np.int64)
         if p.kind == "length":
             self.geoms = [_capsule_of(sim, n) for n in p.names]
         self.nominal = self._read(sim)
