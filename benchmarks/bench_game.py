@@ -20,9 +20,9 @@ import time
 
 import gymnasium as gym
 import numpy as np
-from advgame.adversaries import GaussianAdversary
 
 import advgame
+from advgame.adversaries import GaussianAdversary
 from advgame.views import SingleAgentView
 
 ENV = "HalfCheetah-v5"

@@ -22,9 +22,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from advgame.adversaries import SinusoidAdversary
 
 import advgame
+from advgame.adversaries import SinusoidAdversary
 from advgame.disruptors import DynamicsDisruptor, ForceDisruptor, Param
 from advgame.rollout import rollout
 from advgame.schedule import Schedule

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 import pytest
-from advgame.adversaries import GaussianAdversary
 
 import advgame
+from advgame.adversaries import GaussianAdversary
 from advgame.disruptors import (
     ActionDisruptor,
     DynamicsDisruptor,
