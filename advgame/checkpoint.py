@@ -66,6 +66,11 @@ class SB3Policy:
         self.clip_obs = clip_obs
         self._seeded = False
 
+    @property
+    def observation_std(self) -> np.ndarray | None:
+        """The normalizer's std: normalized-space budgets (ATLA) are measured in it."""
+        return self.std
+
     def reset(self, seed: int | None = None) -> None:
         """Seed the sampling of a stochastic policy (torch's generator in this process)."""
         if seed is not None and not self.deterministic:

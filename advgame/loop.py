@@ -212,7 +212,8 @@ class Run:
             spec = t.sides[a].save(folder)
             final = str(folder).replace(".partial", "")
             t.population.add(Member(f"{a}@0", "adversary", a, _rebase(spec, str(folder), final), 0))
-        commit_folder(folder)
+        if folder.exists():
+            commit_folder(folder)
         t.population.save(self.dir / "population.json")
         return 1
 

@@ -86,8 +86,16 @@ def rollout(
 
     Each policy is reset with a seed derived from the episode seed, so a seeded rollout is
     reproducible. Only agents in `game.next_movers` are asked to act (`Game.play`).
+
+    A protagonist policy that exposes ``observation_std`` (an `SB3Checkpoint` trained behind
+    a normalizer) sets the scale of normalized-space observation budgets (ATLA), so a budget
+    means the same at evaluation as in training.
     """
     pols = build_policies(game, policies)
+    for agent in game.protagonists:
+        std = getattr(pols[agent], "observation_std", None)
+        if std is not None:
+            game.set_observation_scale(agent, std)
     results = []
     for i in range(episodes):
         ep_seed = None if seed is None else seed + i
