@@ -17,6 +17,7 @@ from advgame.registry import load, make
 from advgame.rollout import filler_action, rollout
 from advgame.training import (
     _ZERO,
+    PROTAGONISTS,
     Trainer,
     append_progress,
     commit_folder,
@@ -27,6 +28,9 @@ from advgame.training import (
 from advgame.views import view_factory
 
 __all__ = ["Run"]
+
+_TEAM_FACTORY = "advgame.team:team_factory"
+_TEAM_LEARNER = "advgame.agents.marl:TeamLearner"
 
 log = logging.getLogger(__name__)
 
@@ -86,11 +90,14 @@ class Run:
         if it == 1 and cfg.warmup_steps:
             self._warmup(prot_stats)
         t.update_protagonists(prot_stats)
-        prot = t.sides[t.protagonist]
-        frozen = prot.save(partial, deterministic=False)
+        prot = t.sides[PROTAGONISTS]
+        frozen = t.protagonist_specs(prot.save(partial, deterministic=False))
         t.update_adversaries(adv_stats, frozen)
         t.snapshot(partial)
         final = commit_folder(partial)
+        evaluated = {
+            a: _rebase(s, str(partial), str(final), deterministic=True) for a, s in frozen.items()
+        }
         elapsed = now() - start
         p_ret, p_eps, _ = prot_stats.pop()
         a_ret, a_eps, clips = adv_stats.pop()
@@ -106,7 +113,7 @@ class Run:
             "adversary_clipped": clips,
             "fps": steps / max(elapsed, 1e-9),
             "wall_s": elapsed,
-            **self._quick_eval(final, it),
+            **self._quick_eval(evaluated, it),
         }
         t.population.save(self.dir / "population.json")
         append_progress(self.dir / "progress.csv", row, keep_below=it)
@@ -121,27 +128,21 @@ class Run:
         return row
 
     def _warmup(self, stats: EpisodeStats) -> None:
-        prot = self.t.sides[self.t.protagonist]
+        prot = self.t.sides[PROTAGONISTS]
         prot.set_policies({a: load(_ZERO)() for a in self.t.learned})
         prot.learn(self.cfg.warmup_steps, stats)
 
-    def _quick_eval(self, folder: Path, it: int) -> dict[str, float]:
-        """Mean true return of the deterministic protagonist, nominal and attacked (full budget)."""
+    def _quick_eval(self, protagonists: dict[str, Any], it: int) -> dict[str, float]:
+        """Mean true return of the deterministic protagonists, nominal and attacked (full budget)."""
         if not self.cfg.eval_episodes:
             return {}
         t = self.t
         game = make(self.cfg.scenario, preset=self.cfg.preset, phase="eval")
-        ckpt = self._protagonist_spec(folder)
         seed = self.cfg.seed + 100_000 + it
-        nominal = rollout(
-            game,
-            {t.protagonist: ckpt, **{a: load(_ZERO)() for a in game.adversaries}},
-            seed=seed,
-            episodes=self.cfg.eval_episodes,
-        )
+        nominal = rollout(game, protagonists, seed=seed, episodes=self.cfg.eval_episodes)
         attackers = {**t.fixed, **{a: t.population.of(a)[-1].spec for a in t.learned}}
         attacked = rollout(
-            game, {t.protagonist: ckpt, **attackers}, seed=seed, episodes=self.cfg.eval_episodes
+            game, {**protagonists, **attackers}, seed=seed, episodes=self.cfg.eval_episodes
         )
         game.close()
         return {
@@ -149,21 +150,14 @@ class Run:
             "eval_attacked_return": float(np.mean([r.true_return for r in attacked])),
         }
 
-    def _protagonist_spec(self, folder: Path) -> Any:
-        from advgame.checkpoint import SB3Checkpoint
-
-        agent = self.t.protagonist
-        norm = folder / f"{agent}_obs_norm.npz"
-        return SB3Checkpoint(
-            str(folder / f"{agent}.zip"),
-            self.prot_cfg.algo,
-            str(norm) if norm.exists() else None,
-            deterministic=True,
-        )
-
     # -- building ---------------------------------------------------------------------------
     def _env_fns(self, agent: str, policies: dict[str, Any]) -> list[Any]:
         kwargs = {**self.t.train_kwargs, "phase": "train"}
+        if agent == PROTAGONISTS and self.t.team:
+            factory = load(_TEAM_FACTORY)
+            return [factory(self.cfg.scenario, policies, **kwargs) for _ in range(self.cfg.n_envs)]
+        if agent == PROTAGONISTS:
+            agent = self.t.protagonists[0]
         return [
             view_factory(self.cfg.scenario, agent, policies, **kwargs)
             for _ in range(self.cfg.n_envs)
@@ -172,22 +166,30 @@ class Run:
     def _build_sides(self, folder: Path | None) -> None:
         t, cfg = self.t, self.cfg
         game = make(cfg.scenario, preset=cfg.preset)
-        placeholder = ConstantPolicy(filler_action(game.action_space(t.protagonist)))
+        placeholders = {
+            p: ConstantPolicy(filler_action(game.action_space(p))) for p in t.protagonists
+        }
         game.close()
         specs = [
-            (t.protagonist, self.prot_cfg, dict(t.fixed), cfg.protagonist_steps + cfg.warmup_steps)
+            (PROTAGONISTS, self.prot_cfg, dict(t.fixed), cfg.protagonist_steps + cfg.warmup_steps)
         ]
         for a in t.learned:
             others = {k: v for k, v in t.fixed.items() if k != a}
-            specs.append(
-                (a, self.adv_cfg, {t.protagonist: placeholder, **others}, cfg.adversary_steps)
-            )
+            specs.append((a, self.adv_cfg, {**placeholders, **others}, cfg.adversary_steps))
         tb = str(self.dir / "tb")
         for k, (agent, learner, policies, per_iter) in enumerate(specs):
             fns = self._env_fns(agent, policies)
+            if agent == PROTAGONISTS and t.team:
+                t.sides[agent] = (
+                    learner.make_learner(fns, cfg.seed + k, per_iter * cfg.iterations, tb)
+                    if folder is None
+                    else _load_team(folder, learner, fns, tb)
+                )
+                continue
+            agent_id = t.protagonists[0] if agent == PROTAGONISTS else agent
             if folder is None:
                 t.sides[agent] = Side(
-                    agent,
+                    agent_id,
                     learner,
                     fns,
                     cfg.seed + k,
@@ -198,7 +200,7 @@ class Run:
                 )
             else:
                 t.sides[agent] = Side.load(
-                    folder, agent, learner, fns, cfg.vec_env, tensorboard_log=tb
+                    folder, agent_id, learner, fns, cfg.vec_env, tensorboard_log=tb
                 )
 
     def _fresh(self) -> int:
@@ -228,11 +230,21 @@ class Run:
         return int(state["iteration"]) + 1
 
 
-def _rebase(spec: Any, old: str, new: str) -> Any:
+def _rebase(spec: Any, old: str, new: str, deterministic: bool | None = None) -> Any:
+    """`spec` with file paths under `old` moved to `new` (and `deterministic` set, if given)."""
     from dataclasses import replace
 
-    norm = spec.normalizer.replace(old, new) if spec.normalizer else None
-    return replace(spec, path=spec.path.replace(old, new), normalizer=norm)
+    changes: dict[str, Any] = {"path": spec.path.replace(old, new)}
+    if getattr(spec, "normalizer", None):
+        changes["normalizer"] = spec.normalizer.replace(old, new)
+    if deterministic is not None:
+        changes["deterministic"] = deterministic
+    return replace(spec, **changes)
+
+
+def _load_team(folder: Path, learner: Any, fns: list[Any], tb: str) -> Any:
+    """Rebuild a protagonist team learner saved in `folder` (resume)."""
+    return load(_TEAM_LEARNER).load(folder, learner, fns, tensorboard_log=tb)
 
 
 class _NoBar:

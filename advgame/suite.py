@@ -21,12 +21,14 @@ from advgame.config import load_json
 from advgame.errors import ConfigError
 from advgame.evaluation import AdversarySetup, PayoffTable, budget_sweep, evaluate, population_jobs
 from advgame.population import Population
-from advgame.registry import load, scenario_spec
-from advgame.training import TrainConfig
+from advgame.registry import load, make, scenario_spec
+from advgame.training import TEAM_ALGOS, TrainConfig
 
 __all__ = ["BUDGETS", "demo", "evaluate_runs", "report_folder", "run_protagonist"]
 
 log = logging.getLogger(__name__)
+
+_ACTOR_SPEC = "advgame.agents.marl_nets:TorchActorCheckpoint"
 
 RANDOM = ("state-gauss-0.1", "state-gauss-0.15", "state-uniform-0.2-0.8", "action-gauss-0.1")
 """Random-mode presets evaluated when the scenario has them (the paper's settings)."""
@@ -38,8 +40,11 @@ BUDGETS = (0.0, 0.05, 0.1, 0.15)
 """Gaussian state-noise σ of the return-vs-budget sweep (the paper's Fig. 3 levels and more)."""
 
 
-def run_protagonist(run_dir: Path) -> tuple[TrainConfig, SB3Checkpoint]:
-    """A finished (or interrupted) run's config and its last protagonist as a policy spec."""
+def run_protagonist(run_dir: Path) -> tuple[TrainConfig, Any]:
+    """A finished (or interrupted) run's config and its last protagonist(s) as a policy spec.
+
+    Team runs (MAPPO/IPPO) give ``{protagonist id: spec}``, one actor per protagonist.
+    """
     state_path = run_dir / "state.json"
     if not state_path.exists():
         raise ConfigError(
@@ -47,6 +52,11 @@ def run_protagonist(run_dir: Path) -> tuple[TrainConfig, SB3Checkpoint]:
         )
     cfg = load_json(TrainConfig, run_dir / "config.json")
     folder = run_dir / json.loads(state_path.read_text())["checkpoint"]
+    if cfg.protagonist_algo in TEAM_ALGOS:
+        actor = load(_ACTOR_SPEC)
+        path = str(folder / f"{cfg.protagonist_algo}_actors.pt")
+        protagonists = make(cfg.scenario, preset=cfg.preset).protagonists
+        return cfg, {p: actor(path, p, deterministic=True) for p in protagonists}
     norm = folder / "protagonist_obs_norm.npz"
     spec = SB3Checkpoint(
         str(folder / "protagonist.zip"),

@@ -28,7 +28,7 @@ import numpy as np
 
 from advgame.config import load_json, save_json
 from advgame.errors import ConfigError
-from advgame.learning import EpisodeStats, Side
+from advgame.learning import EpisodeStats
 from advgame.population import SAMPLING, Member, Population
 from advgame.registry import load, make
 
@@ -37,6 +37,11 @@ __all__ = ["METHODS", "TrainConfig", "Trainer", "learner_config", "resume", "tra
 log = logging.getLogger(__name__)
 
 _LEARNERS = "advgame.agents.sb3:LEARNERS"
+_TEAM_LEARNERS = "advgame.agents.marl:MARL_LEARNERS"
+TEAM_ALGOS = ("mappo", "ippo")
+"""Protagonist learners that train a whole team (MaMuJoCo) instead of one SB3 agent."""
+PROTAGONISTS = "protagonists"
+"""The key of the protagonist side in `Trainer.sides` (one agent or a whole team)."""
 _ZERO = "advgame.adversaries.noise:ZeroAdversary"
 
 METHODS: dict[str, dict[str, Any]] = {
@@ -59,8 +64,8 @@ class TrainConfig:
     learned: list[str] | None = None
     """Adversary agents trained in the adversary phase (None: every adversary the preset gives
     no fixed policy; []: none, i.e. plain training against fixed or no-op adversaries)."""
-    protagonist_algo: Literal["ppo", "sac", "td3"] = "ppo"
-    """Protagonist learner."""
+    protagonist_algo: Literal["ppo", "sac", "td3", "mappo", "ippo"] = "ppo"
+    """Protagonist learner: SB3 PPO/SAC/TD3 for one protagonist, MAPPO/IPPO for a team."""
     adversary_algo: Literal["ppo", "sac"] = "ppo"
     """Learner of each learned adversary."""
     protagonist_hparams: dict[str, Any] | None = None
@@ -114,7 +119,7 @@ def learner_config(algo: str, overrides: dict[str, Any] | None) -> Any:
     """The learner config of `algo` with `overrides` applied (unknown names are an error)."""
     from advgame.config import from_dict, to_dict
 
-    learners = load(_LEARNERS)
+    learners = {**load(_LEARNERS), **(load(_TEAM_LEARNERS) if algo in TEAM_ALGOS else {})}
     if algo not in learners:
         raise ConfigError(f"Unknown learner {algo!r}; expected one of {sorted(learners)}.")
     base = learners[algo]()
@@ -145,11 +150,12 @@ class Trainer:
         self.dir = Path(run_dir)
         self.progress = progress
         probe = make(config.scenario, preset=config.preset)
-        self.protagonist = probe.protagonists[0]
-        if len(probe.protagonists) != 1:
+        self.protagonists: tuple[str, ...] = probe.protagonists
+        self.team = config.protagonist_algo in TEAM_ALGOS
+        if len(self.protagonists) > 1 and not self.team:
             raise ConfigError(
-                "Trainer drives single-protagonist scenarios; multi-agent learners "
-                "plug in through advgame.agents."
+                f"{config.scenario} has {len(self.protagonists)} protagonists; train them with "
+                f"protagonist_algo='mappo' or 'ippo', not {config.protagonist_algo!r}."
             )
         preset = probe.preset
         self.fixed = dict(preset.adversaries) if preset is not None else {}
@@ -175,12 +181,13 @@ class Trainer:
         self.rng = np.random.default_rng(config.seed)
         self.population = Population()
         self.iteration = 0
-        self.sides: dict[str, Side] = {}
+        self.sides: dict[str, Any] = {}
+        """`PROTAGONISTS` -> the protagonist side; each learned adversary id -> its side."""
 
     # -- the three steps --------------------------------------------------------------------
     def update_protagonists(self, stats: EpisodeStats) -> None:
         """Train the protagonist against opponents drawn from the population."""
-        side = self.sides[self.protagonist]
+        side = self.sides[PROTAGONISTS]
         for i in range(self.cfg.n_envs):
             drawn = {
                 a: self._opponent(self.population.sample(a, self.cfg.sampling, self.rng))
@@ -190,16 +197,19 @@ class Trainer:
         self._push_scale(side, side)
         side.learn(self.cfg.protagonist_steps, stats)
 
-    def update_adversaries(self, stats: EpisodeStats, frozen: Any) -> None:
-        """Train each learned adversary against the frozen protagonist (and latest fellows)."""
-        prot = self.sides[self.protagonist]
+    def update_adversaries(self, stats: EpisodeStats, frozen: dict[str, Any]) -> None:
+        """Train each learned adversary against the frozen protagonists (and latest fellows).
+
+        `frozen` maps every protagonist id to the spec of its just-saved policy.
+        """
+        prot = self.sides[PROTAGONISTS]
         prot.freeze()
         for agent in self.learned:
             side = self.sides[agent]
             fellows = {
                 a: self._opponent(self.population.of(a)[-1]) for a in self.learned if a != agent
             }
-            side.set_policies({self.protagonist: frozen, **fellows})
+            side.set_policies({**frozen, **fellows})
             self._push_scale(side, prot)
             if self.cfg.adversary_steps:
                 side.learn(self.cfg.adversary_steps, stats)
@@ -212,7 +222,9 @@ class Trainer:
         for agent in self.learned:
             spec = self.sides[agent].save(folder)
             if keep:
-                final = replace(spec, path=spec.path.replace(".partial", ""), normalizer=_final(spec.normalizer))
+                final = replace(
+                    spec, path=spec.path.replace(".partial", ""), normalizer=_final(spec.normalizer)
+                )
                 self.population.add(
                     Member(
                         f"{agent}@{self.iteration}",
@@ -229,10 +241,19 @@ class Trainer:
         spec = member.spec
         return replace(spec, deterministic=False) if hasattr(spec, "deterministic") else spec
 
-    def _push_scale(self, side: Side, source: Side) -> None:
+    def _push_scale(self, side: Any, source: Any) -> None:
+        """Give `side`'s games the normalizer std of `source` (the protagonist side)."""
+        if not self.normalized_targets:
+            return
         std = source.observation_std()
-        if std is not None and self.normalized_targets:
-            side.set_observation_scale(self.protagonist, std)
+        stds = std if isinstance(std, dict) else {self.protagonists[0]: std}
+        if std is not None:
+            for target, value in stds.items():
+                side.set_observation_scale(target, value)
+
+    def protagonist_specs(self, saved: Any) -> dict[str, Any]:
+        """What the protagonist side's `save` returned, as ``{protagonist id: spec}``."""
+        return dict(saved) if isinstance(saved, dict) else {self.protagonists[0]: saved}
 
 
 def _final(path: str | None) -> str | None:
