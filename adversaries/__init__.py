@@ -13,12 +13,18 @@ if __name__ != "advgame.adversaries":  # pragma: no cover - packaging guard
         "(pip install -e . from the repository root), not as the bare `adversaries`."
     )
 
-from advgame.adversaries.noise import GaussianAdversary, UniformAdversary, ZeroAdversary
+from advgame.adversaries.noise import (
+    GaussianAdversary,
+    RandomAdversary,
+    UniformAdversary,
+    ZeroAdversary,
+)
 from advgame.adversaries.scheduled import ConstantAdversary, SinusoidAdversary
 
 __all__ = [
     "ConstantAdversary",
     "GaussianAdversary",
+    "RandomAdversary",
     "SinusoidAdversary",
     "UniformAdversary",
     "ZeroAdversary",

@@ -133,3 +133,58 @@ class UniformAdversary:
         n = info.action_size
         low, high = _vector(self.low, n, "low"), _vector(self.high, n, "high")
         return _NoisePolicy(info, lambda rng, k: rng.uniform(low, high, size=(k, n)))
+
+
+class _UniformActions:
+    """Samples the action box itself (no encoding), in seeded blocks."""
+
+    BLOCK = 256
+
+    def __init__(self, low: np.ndarray, high: np.ndarray) -> None:
+        self.low, self.high = low, high
+        self.rng = np.random.default_rng()
+        self._block = np.empty((0, *low.shape), dtype=np.float32)
+        self._i = 0
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reseed (when a seed is given)."""
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+            self._i = len(self._block)
+
+    def act(self, observation: Any) -> np.ndarray:
+        """The next uniform action."""
+        if self._i >= len(self._block):
+            size = (self.BLOCK, *self.low.shape)
+            self._block = self.rng.uniform(self.low, self.high, size=size).astype(np.float32)
+            self._i = 0
+        self._i += 1
+        return self._block[self._i - 1]
+
+
+@dataclass(frozen=True)
+class RandomAdversary:
+    """Uniform over the adversary's whole action space: random noise that fills the budget.
+
+    The fair random baseline for a learned adversary: the same budget, no intelligence.
+
+    Example:
+        >>> import advgame
+        >>> game = advgame.make("Hopper-v5", preset="atla")
+        >>> pol = RandomAdversary().build(game.agent_info("observation_adversary"))
+        >>> pol.reset(seed=0); bool(abs(pol.act(None)).max() <= 1.0)
+        True
+
+    """
+
+    def build(self, info: AgentInfo) -> Policy:
+        """A seeded sampler of the adversary's (bounded) action space."""
+        space = info.action_space
+        low = np.asarray(getattr(space, "low", np.nan), dtype=np.float64)
+        high = np.asarray(getattr(space, "high", np.nan), dtype=np.float64)
+        if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
+            raise ConfigError(
+                f"RandomAdversary needs a bounded Box action space; {info.agent!r} has {space} "
+                "(for an unbounded disruptor use GaussianAdversary)."
+            )
+        return _UniformActions(low, high)

@@ -25,7 +25,7 @@ class ConstantAdversary:
         >>> import advgame
         >>> game = advgame.make("Ant-v5", preset="shift-deterministic")
         >>> ConstantAdversary((14.715, 1.0)).build(game.agent_info("dynamics_adversary")).act(None)
-        array([ 0.  , -0.6], dtype=float32)
+        array([-0.01998002,  0.        ], dtype=float32)
 
     """
 
@@ -78,7 +78,7 @@ class SinusoidAdversary:
         >>> pol = SinusoidAdversary((14.715, 1.0), (4.905, 0.2), 0.5).build(
         ...     game.agent_info("dynamics_adversary"))
         >>> pol.reset(); pol.act(None)
-        array([ 0. , -0.6], dtype=float32)
+        array([-0.01998002,  0.        ], dtype=float32)
 
     """
 
