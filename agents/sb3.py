@@ -34,30 +34,59 @@ class LinearDecay:
         return self.initial * max(1.0 - done / self.total, 0.0)
 
 
-def _check_positive(cfg: Any, names: tuple[str, ...]) -> None:
-    for name in names:
-        value = getattr(cfg, name)
-        if not value > 0:
-            raise ConfigError(f"{type(cfg).__name__}.{name} must be > 0, got {value!r}.")
+@dataclass(frozen=True)
+class _SB3Config:
+    """What every SB3 learner config has; subclasses set their own defaults."""
+
+    algo: ClassVar[str] = ""
+    positive: ClassVar[tuple[str, ...]] = ("learning_rate",)
+    learning_rate: float = 3e-4
+    """Adam step size (actor and critic)."""
+    lr_decay: bool = False
+    """Decay the learning rate linearly to 0 over the run."""
+    gamma: float = 0.99
+    """Discount factor."""
+    net_arch: tuple[int, ...] = (64, 64)
+    """Hidden layer sizes of the policy and value networks."""
+
+    def __post_init__(self) -> None:
+        for name in self.positive:
+            value = getattr(self, name)
+            if not value > 0:
+                raise ConfigError(f"{type(self).__name__}.{name} must be > 0, got {value!r}.")
+        if not self.net_arch or not all(isinstance(h, int) and h > 0 for h in self.net_arch):
+            raise ConfigError(
+                f"{type(self).__name__}.net_arch must be positive ints, got {self.net_arch!r}."
+            )
+
+    def _common(self, seed: int, total_steps: int, tensorboard_log: str | None) -> dict[str, Any]:
+        """Keyword arguments every SB3 algorithm takes, from this config."""
+        lr: Any = (
+            LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
+        )
+        return {
+            "learning_rate": lr,
+            "gamma": self.gamma,
+            "seed": seed,
+            "device": "cpu",
+            "verbose": 0,
+            "tensorboard_log": tensorboard_log,
+            "policy_kwargs": {"net_arch": list(self.net_arch)},
+        }
 
 
 @dataclass(frozen=True)
-class PPOConfig:
+class PPOConfig(_SB3Config):
     """PPO with the paper's table (PPO/MAPPO/IPPO hyper-parameters)."""
 
     algo: ClassVar[str] = "ppo"
-    learning_rate: float = 3e-4
-    """Adam step size."""
+    positive: ClassVar[tuple[str, ...]] = ("learning_rate", "n_steps", "n_epochs", "batch_size")
     lr_decay: bool = True
     """Decay the learning rate linearly to 0 over the run (paper: lr decay True)."""
-    gamma: float = 0.99
-    """Discount factor."""
     gae_lambda: float = 0.95
     """GAE λ."""
     clip_range: float = 0.2
     """PPO ratio clip ε."""
-    net_arch: tuple[int, ...] = (64, 64)
-    """Hidden layer sizes of the policy and value networks."""
     n_steps: int = 2048
     """Steps per environment per rollout (paper: 2048 steps per collect)."""
     n_epochs: int = 10
@@ -71,69 +100,66 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     """Gradient clipping norm."""
 
-    def __post_init__(self) -> None:
-        _check_positive(self, ("learning_rate", "n_steps", "n_epochs", "batch_size"))
-
     def make_model(
         self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
     ) -> Any:
         """Build an SB3 PPO on `env` (a VecEnv)."""
         from stable_baselines3 import PPO
 
-        lr: Any = (
-            LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
-        )
         return PPO(
             "MlpPolicy",
             env,
-            learning_rate=lr,
             n_steps=self.n_steps,
             batch_size=self.batch_size,
             n_epochs=self.n_epochs,
-            gamma=self.gamma,
             gae_lambda=self.gae_lambda,
             clip_range=self.clip_range,
             ent_coef=self.ent_coef,
             vf_coef=self.vf_coef,
             max_grad_norm=self.max_grad_norm,
-            policy_kwargs={"net_arch": list(self.net_arch)},
-            seed=seed,
-            device="cpu",
-            verbose=0,
-            tensorboard_log=tensorboard_log,
+            **self._common(seed, total_steps, tensorboard_log),
         )
 
 
 @dataclass(frozen=True)
-class SACConfig:
-    """SAC with the paper's table (fixed temperature α = 0.2, [64, 64], lr 1e-3)."""
+class _OffPolicyConfig(_SB3Config):
+    """What SAC and TD3 share: a replay buffer and soft target updates."""
 
-    algo: ClassVar[str] = "sac"
+    positive: ClassVar[tuple[str, ...]] = ("learning_rate", "buffer_size", "batch_size")
     learning_rate: float = 1e-3
     """Actor and critic step size."""
-    lr_decay: bool = False
-    """Decay the learning rate linearly to 0 over the run."""
-    gamma: float = 0.99
-    """Discount factor."""
     tau: float = 0.005
     """Target network update rate."""
-    ent_coef: float = 0.2
-    """Entropy temperature α (fixed: the paper's auto alpha is False)."""
-    net_arch: tuple[int, ...] = (64, 64)
-    """Hidden layer sizes."""
     buffer_size: int = 1_000_000
-    """Replay buffer size (SB3's default; the paper's 4096 is its collector buffer)."""
+    """Replay buffer size (SB3's default; the paper's table lists 4096)."""
     learning_starts: int = 10_000
     """Random steps before learning (paper: start time step 10000)."""
     batch_size: int = 64
     """Minibatch size."""
+
+    def _off_policy(
+        self, seed: int, total_steps: int, tensorboard_log: str | None
+    ) -> dict[str, Any]:
+        return {
+            "buffer_size": self.buffer_size,
+            "learning_starts": self.learning_starts,
+            "batch_size": self.batch_size,
+            "tau": self.tau,
+            **self._common(seed, total_steps, tensorboard_log),
+        }
+
+
+@dataclass(frozen=True)
+class SACConfig(_OffPolicyConfig):
+    """SAC with the paper's table (fixed temperature α = 0.2, [64, 64], lr 1e-3, batch 64)."""
+
+    algo: ClassVar[str] = "sac"
+    ent_coef: float = 0.2
+    """Entropy temperature α (fixed: the paper's auto alpha is False)."""
     train_freq: int = 1
     """Environment steps between updates."""
     gradient_steps: int = 1
     """Updates per training call (paper: update per step 1)."""
-
-    def __post_init__(self) -> None:
-        _check_positive(self, ("learning_rate", "buffer_size", "batch_size", "train_freq"))
 
     def make_model(
         self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
@@ -141,57 +167,29 @@ class SACConfig:
         """Build an SB3 SAC on `env`."""
         from stable_baselines3 import SAC
 
-        lr: Any = (
-            LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
-        )
         return SAC(
             "MlpPolicy",
             env,
-            learning_rate=lr,
-            buffer_size=self.buffer_size,
-            learning_starts=self.learning_starts,
-            batch_size=self.batch_size,
-            tau=self.tau,
-            gamma=self.gamma,
             train_freq=self.train_freq,
             gradient_steps=self.gradient_steps,
             ent_coef=self.ent_coef,
-            policy_kwargs={"net_arch": list(self.net_arch)},
-            seed=seed,
-            device="cpu",
-            verbose=0,
-            tensorboard_log=tensorboard_log,
+            **self._off_policy(seed, total_steps, tensorboard_log),
         )
 
 
 @dataclass(frozen=True)
-class TD3Config:
-    """TD3 (SB3 defaults, with Gaussian exploration noise σ = 0.1)."""
+class TD3Config(_OffPolicyConfig):
+    """TD3 (SB3's defaults: [256, 256], batch 256), Gaussian exploration noise σ = 0.1."""
 
     algo: ClassVar[str] = "td3"
-    learning_rate: float = 1e-3
-    """Actor and critic step size."""
-    lr_decay: bool = False
-    """Decay the learning rate linearly to 0 over the run."""
-    gamma: float = 0.99
-    """Discount factor."""
-    tau: float = 0.005
-    """Target network update rate."""
     net_arch: tuple[int, ...] = (256, 256)
     """Hidden layer sizes."""
-    buffer_size: int = 1_000_000
-    """Replay buffer size."""
-    learning_starts: int = 10_000
-    """Random steps before learning."""
     batch_size: int = 256
     """Minibatch size."""
     action_noise: float = 0.1
     """Std of the Gaussian exploration noise, as a fraction of the action range."""
     policy_delay: int = 2
     """Critic updates per actor update."""
-
-    def __post_init__(self) -> None:
-        _check_positive(self, ("learning_rate", "buffer_size", "batch_size", "policy_delay"))
 
     def make_model(
         self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
@@ -204,25 +202,12 @@ class TD3Config:
         n = env.action_space.shape[-1]
         half = (env.action_space.high - env.action_space.low) / 2.0
         noise = NormalActionNoise(np.zeros(n), self.action_noise * half * np.ones(n))
-        lr: Any = (
-            LinearDecay(self.learning_rate, total_steps) if self.lr_decay else self.learning_rate
-        )
         return TD3(
             "MlpPolicy",
             env,
-            learning_rate=lr,
-            buffer_size=self.buffer_size,
-            learning_starts=self.learning_starts,
-            batch_size=self.batch_size,
-            tau=self.tau,
-            gamma=self.gamma,
             policy_delay=self.policy_delay,
             action_noise=noise,
-            policy_kwargs={"net_arch": list(self.net_arch)},
-            seed=seed,
-            device="cpu",
-            verbose=0,
-            tensorboard_log=tensorboard_log,
+            **self._off_policy(seed, total_steps, tensorboard_log),
         )
 
 
