@@ -6,10 +6,9 @@ process pool (and the same jobs could be shipped to Ray tasks unchanged). Every 
 one row of a `PayoffTable`, which saves to CSV/JSON and computes the design's robust metrics on
 the *true* return: nominal, mean, worst case, CVaR and the degradation from nominal::
 
-    jobs = population_jobs("Hopper-v5", {"mine": my_policy},
-                           {"nominal": AdversarySetup.nominal(),
-                            "gauss": AdversarySetup.from_preset("Hopper-v5", "state-gauss-0.1")},
-                           seeds=(0, 1))
+    setups = {"nominal": AdversarySetup.nominal(),
+              "gauss": AdversarySetup.from_preset("Hopper-v5", "state-gauss-0.1")}
+    jobs = population_jobs("Hopper-v5", {"mine": my_policy}, setups, seeds=(0, 1))
     evaluate(jobs, workers=2).metrics(alpha=0.1)
 """
 
@@ -17,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import itertools
 import json
 import logging
@@ -30,33 +30,64 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 
 __all__ = [
-    "COLUMNS", "NOMINAL", "AdversarySetup", "EvalJob", "PayoffTable", "budget_sweep", "ci95",
-    "cvar", "degradation", "evaluate", "population_jobs", "run_job", "shift_grid", "worst_case",
+    "COLUMNS",
+    "NOMINAL",
+    "SEED_STRIDE",
+    "AdversarySetup",
+    "EvalJob",
+    "PayoffTable",
+    "budget_sweep",
+    "ci95",
+    "cvar",
+    "degradation",
+    "evaluate",
+    "population_jobs",
+    "run_job",
+    "shift_grid",
+    "worst_case",
 ]
 
 log = logging.getLogger(__name__)
 
+SEED_STRIDE = 10_000
+"""Episode ``i`` of evaluation seed ``s`` plays `rollout` seed ``s * SEED_STRIDE + i``, so the
+episodes of seeds 0, 1, 2, ... never share a reset seed (as ``s + i`` would)."""
 NOMINAL = "nominal"
 """The adversary name of the undisrupted game, the reference of `degradation`."""
-COLUMNS = ("scenario", "protagonist", "adversary", "seed", "episode", "true_return",
-           "observed_return", "cost", "payoff", "length", "clipped")
-"""The columns of every row; a job's `EvalJob.tags` add more."""
+COLUMNS: tuple[str, ...] = ("scenario", "protagonist", "adversary", "seed", "episode")
+COLUMNS += ("true_return", "observed_return", "cost", "payoff", "length", "clipped", "terminated")
+"""The columns of every row (`advgame.rollout.EpisodeResult`, clips summed); tags add more."""
+_PRELOAD = ("advgame.evaluation", "advgame.rollout", "advgame.scenarios.mujoco", "mujoco")
 _INT, _STR = {"seed", "episode", "length", "clipped"}, {"scenario", "protagonist", "adversary"}
-_T975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179,
-         2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064,
-         2.060, 2.056, 2.052, 2.048, 2.045, 2.042)  # Student t 0.975 quantile, df = 1..30
+# Student t 0.975 quantiles for df = 1..30 (95 % two-sided intervals); 1.96 beyond.
+_T975: tuple[float, ...] = (
+    12.706,
+    4.303,
+    3.182,
+    2.776,
+    2.571,
+    2.447,
+    2.365,
+    2.306,
+    2.262,
+    2.228,
+    2.201,
+    2.179,
+)
+_T975 += (2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064)
+_T975 += (2.060, 2.056, 2.052, 2.048, 2.045, 2.042)
 
 
 # -- metrics: pure functions ----------------------------------------------------------------
 def cvar(values: Sequence[float] | np.ndarray, alpha: float = 0.1) -> float:
-    """CVaR_α of returns: the mean of the ``k = ⌈α·n⌉`` lowest of the ``n`` values.
+    """Return CVaR_α of returns: the mean of the ``k = ⌈α·n⌉`` lowest of the ``n`` values.
 
     ``α·n`` is rounded to 9 decimals before the ceiling, so ``α = 0.3, n = 10`` takes the 3
     lowest (not 4 through floating-point error). ``α = 1`` is the plain mean.
@@ -64,6 +95,7 @@ def cvar(values: Sequence[float] | np.ndarray, alpha: float = 0.1) -> float:
     Example:
         >>> cvar([5.0, 1.0, 3.0, 2.0], alpha=0.5)
         1.5
+
     """
     v = np.sort(np.asarray(values, dtype=np.float64).ravel())
     if not 0.0 < alpha <= 1.0:
@@ -75,7 +107,7 @@ def cvar(values: Sequence[float] | np.ndarray, alpha: float = 0.1) -> float:
 
 
 def worst_case(cell_means: Mapping[str, float] | Sequence[float]) -> float:
-    """The worst-case return: the minimum of the per-adversary cell means (nan if one is nan)."""
+    """Return the worst-case return: the lowest per-adversary cell mean (nan if one is nan)."""
     vals = list(cell_means.values()) if isinstance(cell_means, Mapping) else list(cell_means)
     if not vals:
         raise ConfigError("worst_case needs at least one cell mean, got none.")
@@ -83,14 +115,14 @@ def worst_case(cell_means: Mapping[str, float] | Sequence[float]) -> float:
 
 
 def degradation(nominal: float, value: float) -> float:
-    """Relative loss ``(nominal - value) / |nominal|``; nan if nominal is 0 or not finite."""
+    """Return the relative loss ``(nominal - value) / |nominal|``; nan if nominal is 0 or nan."""
     if not math.isfinite(nominal) or nominal == 0:
         return math.nan
     return (nominal - value) / abs(nominal)
 
 
 def ci95(values: Sequence[float] | np.ndarray) -> float:
-    """Half-width of the 95 % Student-t interval of the mean of `values` (nan for n < 2)."""
+    """Return the half-width of the 95 % Student-t interval of the mean (nan for n < 2)."""
     v = np.asarray(values, dtype=np.float64)
     if v.size < 2:
         return math.nan
@@ -100,9 +132,9 @@ def ci95(values: Sequence[float] | np.ndarray) -> float:
 
 # -- jobs -----------------------------------------------------------------------------------
 def _check_spec(spec: Any, what: str) -> None:
-    if not (hasattr(spec, "build") or callable(spec)):
-        raise ConfigError(f"{what} is {spec!r}; expected a PolicySpec (build), a Policy "
-                          "(reset/act) or a module-level callable observation -> action.")
+    if not (hasattr(spec, "build") or hasattr(spec, "act") or callable(spec)):
+        msg = "expected a PolicySpec (build), a Policy (reset/act) or a callable obs -> action"
+        raise ConfigError(f"{what} is {spec!r}; {msg}.")
 
 
 def _seeds(seeds: Any, episodes: int) -> tuple[int, ...]:
@@ -110,14 +142,10 @@ def _seeds(seeds: Any, episodes: int) -> tuple[int, ...]:
         out = tuple(operator.index(s) for s in ((seeds,) if np.ndim(seeds) == 0 else seeds))
     except TypeError:
         raise ConfigError(f"seeds must be ints, got {seeds!r}; e.g. seeds=(0, 1, 2).") from None
-    if not out or min(out) < 0 or isinstance(seeds, bool):
-        raise ConfigError(f"seeds must be a non-empty tuple of ints >= 0, got {seeds!r}.")
-    resets = [s + i for s in out for i in range(episodes)]
-    if len(set(resets)) != len(resets):
-        raise ConfigError(
-            f"seeds={out} with episodes={episodes} replay the same episodes: episode i of seed s "
-            f"resets with seed s + i. Space the seeds at least {episodes} apart, e.g. "
-            f"seeds={tuple(range(0, episodes * len(out), episodes))}.")
+    if not out or min(out) < 0 or len(set(out)) != len(out):
+        raise ConfigError(f"seeds must be distinct ints >= 0, got {seeds!r}; e.g. (0, 1, 2).")
+    if episodes > SEED_STRIDE:
+        raise ConfigError(f"episodes={episodes} > {SEED_STRIDE} per seed; use more seeds.")
     return out
 
 
@@ -125,26 +153,26 @@ def _seeds(seeds: Any, episodes: int) -> tuple[int, ...]:
 class EvalJob:
     """One payoff-matrix cell: a protagonist against one adversary set-up, over seeds.
 
-    A pure, picklable value: everything in it must pickle (specs, module-level functions),
-    so it can run in a worker process or a Ray task.
+    A pure value whose every part pickles (specs, module-level functions), so it can run in a
+    worker process or a Ray task. Unknown scenarios and malformed fields fail on construction.
     """
 
     scenario: str
     """Registered scenario id, e.g. ``"Hopper-v5"``."""
     make_kwargs: Mapping[str, Any] = field(default_factory=dict)
-    """Keyword arguments of `advgame.make` (``preset=`` or ``disruptors=``, task options);
-    ``phase`` defaults to ``"eval"``."""
+    """`advgame.make` options (``preset=`` or ``disruptors=``, task options); ``phase`` defaults
+    to ``"eval"``."""
     protagonist: str
-    """The protagonist's name (a row label of the matrix)."""
+    """The protagonist's name (a row of the matrix)."""
     protagonist_spec: Any
-    """A `PolicySpec`, a `Policy` or a picklable module-level callable ``obs -> action``, used
-    for every protagonist; or a dict ``{protagonist agent id: spec}``."""
+    """A `PolicySpec`, a `Policy` or a picklable module-level callable ``obs -> action`` played
+    by every protagonist of the game, or a dict ``{protagonist agent id: spec}``."""
     adversary: str = NOMINAL
-    """The adversary set-up's name (a column label of the matrix)."""
+    """The adversary set-up's name (a column of the matrix)."""
     adversary_specs: Mapping[str, Any] = field(default_factory=dict)
     """``{adversary agent id: spec}``; adversaries not listed play their no-op."""
     seeds: tuple[int, ...] = (0,)
-    """Seeds; each runs `episodes` episodes, episode ``i`` of seed ``s`` resetting with ``s + i``."""
+    """Distinct seeds; episode ``i`` of seed ``s`` resets with ``s * SEED_STRIDE + i``."""
     episodes: int = 1
     """Episodes per seed."""
     tags: Mapping[str, Any] = field(default_factory=dict)
@@ -153,42 +181,37 @@ class EvalJob:
     def __post_init__(self) -> None:
         from advgame.registry import scenario_spec
 
-        scenario_spec(self.scenario)  # unknown ids fail here, with a "did you mean"
+        scenario_spec(self.scenario)  # an unknown id fails here, with a "did you mean"
         for name in ("protagonist", "adversary"):
-            if not isinstance(getattr(self, name), str) or not getattr(self, name):
-                raise ConfigError(f"EvalJob.{name} must be a non-empty name, got {getattr(self, name)!r}.")
-        if not isinstance(self.episodes, int) or isinstance(self.episodes, bool) or self.episodes < 1:
+            value = getattr(self, name)
+            if not isinstance(value, str) or not value:
+                raise ConfigError(f"EvalJob.{name} must be a non-empty str, got {value!r}.")
+        if type(self.episodes) is not int or self.episodes < 1:
             raise ConfigError(f"EvalJob.episodes must be an int >= 1, got {self.episodes!r}.")
         object.__setattr__(self, "seeds", _seeds(self.seeds, self.episodes))
-        object.__setattr__(self, "make_kwargs", self._make_kwargs())
-        specs = self.protagonist_spec
-        for agent, spec in (specs.items() if isinstance(specs, Mapping) else [("", specs)]):
-            _check_spec(spec, f"The protagonist_spec{f' of {agent!r}' if agent else ''}")
-        if not isinstance(self.adversary_specs, Mapping):
-            raise ConfigError(f"adversary_specs must be a dict {{agent: spec}}, got {self.adversary_specs!r}.")
+        for name in ("make_kwargs", "adversary_specs", "tags"):
+            if not isinstance(getattr(self, name), Mapping):
+                raise ConfigError(f"EvalJob.{name} must be a dict, got {getattr(self, name)!r}.")
+        object.__setattr__(self, "make_kwargs", {"phase": "eval", **self.make_kwargs})
+        if self.make_kwargs["phase"] not in ("train", "eval"):
+            raise ConfigError(f"phase must be 'train' or 'eval': {self.make_kwargs['phase']!r}.")
+        if "preset" in self.make_kwargs and "disruptors" in self.make_kwargs:
+            raise ConfigError("make_kwargs has both preset= and disruptors=; give one of them.")
+        prot = self.protagonist_spec
+        for agent, spec in prot.items() if isinstance(prot, Mapping) else [("all", prot)]:
+            _check_spec(spec, f"The protagonist_spec ({agent})")
         for agent, spec in self.adversary_specs.items():
             _check_spec(spec, f"The adversary spec of {agent!r}")
-        bad = {k: v for k, v in dict(self.tags).items()
-               if k in COLUMNS or not isinstance(v, (str, int, float))}
+        bad = {k: v for k, v in self.tags.items() if k in COLUMNS or not np.isscalar(v)}
         if bad:
             raise ConfigError(f"tags {bad} must be scalars named apart from the columns {COLUMNS}.")
-
-    def _make_kwargs(self) -> dict[str, Any]:
-        if not isinstance(self.make_kwargs, Mapping):
-            raise ConfigError(f"make_kwargs must be a dict of advgame.make options, got {self.make_kwargs!r}.")
-        kw = {"phase": "eval", **self.make_kwargs}
-        if kw["phase"] not in ("train", "eval"):
-            raise ConfigError(f"make_kwargs phase must be 'train' or 'eval', got {kw['phase']!r}.")
-        if "preset" in kw and "disruptors" in kw:
-            raise ConfigError("make_kwargs has both preset= and disruptors=; give one of them.")
-        return kw
 
 
 @contextlib.contextmanager
 def _torch_threads(n: int) -> Iterator[None]:
     """Run torch (if this process imported it) on `n` threads, restoring the count after."""
     torch = sys.modules.get("torch")
-    before = torch.get_num_threads() if torch is not None else 0
+    before = torch.get_num_threads() if torch is not None else n
     if torch is not None:
         torch.set_num_threads(n)
     try:
@@ -198,56 +221,44 @@ def _torch_threads(n: int) -> Iterator[None]:
             torch.set_num_threads(before)
 
 
-def _policies(job: EvalJob, game: Any) -> dict[str, Any]:
-    unknown = set(job.adversary_specs) - set(game.adversaries)
-    if unknown:
-        hint = "".join(did_you_mean(u, game.adversaries) for u in sorted(unknown))
-        raise UnknownNameError(
-            f"Job {job.protagonist!r} vs {job.adversary!r}: {sorted(unknown)} are not adversaries of "
-            f"{job.scenario} made with {job.make_kwargs}.{hint} Its adversaries: {list(game.adversaries)}.")
-    specs = job.protagonist_spec
-    if isinstance(specs, Mapping):
-        if set(specs) != set(game.protagonists):
-            raise ConfigError(f"protagonist_spec names {sorted(specs)}, but {job.scenario}'s "
-                              f"protagonists are {list(game.protagonists)}; give one spec for each.")
-        return {**specs, **job.adversary_specs}
-    return {**dict.fromkeys(game.protagonists, specs), **job.adversary_specs}
-
-
 def run_job(job: EvalJob) -> list[dict[str, Any]]:
-    """Play `job` and return one row per episode (`COLUMNS` plus the job's tags).
+    """Play `job`; return one row per episode (`COLUMNS` and the job's tags).
 
-    Policies are built afresh for every seed, so a seed's rows do not depend on the other
-    seeds of the job; torch, if imported, runs on one thread meanwhile.
+    Policies are built afresh for every seed, so a seed's rows do not depend on the job's
+    other seeds; torch, if imported, runs on one thread meanwhile.
     """
     import advgame
     from advgame.rollout import build_policies, rollout
 
     game = advgame.make(job.scenario, **job.make_kwargs)
+    prot = job.protagonist_spec
+    specs = {**(prot if isinstance(prot, Mapping) else dict.fromkeys(game.protagonists, prot))}
+    specs.update(job.adversary_specs)
+    head = {"scenario": job.scenario, "protagonist": job.protagonist, "adversary": job.adversary}
     rows = []
     try:
-        specs = _policies(job, game)
         for seed in job.seeds:
-            policies = build_policies(game, specs)
+            try:
+                policies = build_policies(game, specs)
+            except ConfigError as exc:
+                where = f"{job.scenario} made with {job.make_kwargs}"
+                msg = f"Job {job.protagonist!r} vs {job.adversary!r} on {where}: {exc}"
+                raise type(exc)(msg) from None
             with _torch_threads(1):
-                results = rollout(game, policies, seed=seed, episodes=job.episodes)
+                results = rollout(game, policies, seed=seed * SEED_STRIDE, episodes=job.episodes)
             for i, r in enumerate(results):
-                rows.append({
-                    "scenario": job.scenario, "protagonist": job.protagonist,
-                    "adversary": job.adversary, "seed": seed, "episode": i,
-                    "true_return": float(r.true_return), "observed_return": float(r.observed_return),
-                    "cost": float(r.cost), "payoff": float(r.payoff), "length": int(r.length),
-                    "clipped": int(sum(r.clipped.values())), **job.tags})
+                res = {**dataclasses.asdict(r), "clipped": int(sum(r.clipped.values()))}
+                rows.append({**head, "seed": seed, "episode": i, **res, **job.tags})
     finally:
         game.close()
     return rows
 
 
 def _init_worker(path: list[str]) -> None:
-    """Pool initializer: the parent's import path, and one thread for torch and BLAS."""
-    sys.path[:] = path + [p for p in sys.path if p not in path]
+    """Pool initializer: the caller's import path; one thread for torch and BLAS."""
+    sys.path[:] = path
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ[var] = "1"  # read by torch and BLAS when (and if) a job first imports them
+        os.environ[var] = "1"  # read by torch and BLAS when (and if) a job imports them
     if "torch" in sys.modules:
         sys.modules["torch"].set_num_threads(1)
 
@@ -255,10 +266,11 @@ def _init_worker(path: list[str]) -> None:
 def _run_pickled(blob: bytes) -> list[dict[str, Any]]:
     try:
         job = pickle.loads(blob)
-    except Exception as exc:  # a spec or callable that is not importable in a fresh process
+    except Exception as exc:  # e.g. a callable whose module a fresh process cannot import
         raise ConfigError(
             f"A worker process cannot load a job: {type(exc).__name__}: {exc}. Define callables "
-            "and spec classes at module level of an importable module, or use workers=1.") from None
+            "and specs at module level of an importable module, or use workers=1."
+        ) from None
     return run_job(job)
 
 
@@ -267,53 +279,83 @@ def _pickled(job: EvalJob) -> bytes:
         return pickle.dumps(job)
     except Exception as exc:
         raise ConfigError(
-            f"Job {job.protagonist!r} vs {job.adversary!r} cannot be sent to a worker process "
-            f"({type(exc).__name__}: {exc}). Use module-level functions instead of lambdas or "
-            "closures, specs instead of live policies, or workers=1.") from None
+            f"Job {job.protagonist!r} vs {job.adversary!r} cannot go to a worker process "
+            f"({type(exc).__name__}: {exc}). Use module-level functions, not lambdas or "
+            "closures, and specs rather than live policies; or use workers=1."
+        ) from None
 
 
-def evaluate(jobs: Iterable[EvalJob], workers: int = 1, progress: bool = True,
-             start_method: str = "forkserver") -> PayoffTable:
-    """Run `jobs` and collect their rows, in job order, into a `PayoffTable`.
+def _warm_forkserver(ctx: Any) -> None:
+    """Preload the simulators (and torch and SB3, if used here) in a forkserver yet to start.
+
+    The forkserver then imports them once, and the workers of every later pool start warm.
+    """
+    from multiprocessing import forkserver
+
+    heavy = [m for m in ("torch", "torch._dynamo", "stable_baselines3") if m in sys.modules]
+    server = getattr(forkserver, "_forkserver", None)  # keep what the user asked to preload
+    theirs = list(getattr(server, "_preload_modules", None) or ["__main__"])
+    ctx.set_forkserver_preload(list(dict.fromkeys([*theirs, *_PRELOAD, *heavy])))
+
+
+def _pool_map(blobs: list[bytes], workers: int, start_method: str, bar: Any) -> list[list[dict]]:
+    out: list[list[dict]] = [[] for _ in blobs]
+    ctx = multiprocessing.get_context(start_method)
+    if start_method == "forkserver":
+        _warm_forkserver(ctx)
+    n, path = min(workers, len(blobs)), list(sys.path)
+    with ProcessPoolExecutor(n, ctx, initializer=_init_worker, initargs=(path,)) as pool:
+        futures = {pool.submit(_run_pickled, b): i for i, b in enumerate(blobs)}
+        try:
+            for fut in as_completed(futures):
+                out[futures[fut]] = fut.result()
+                bar.update()
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+    return out
+
+
+def evaluate(
+    jobs: Iterable[EvalJob],
+    workers: int = 1,
+    progress: bool = True,
+    start_method: str = "forkserver",
+) -> PayoffTable:
+    """Run `jobs`; return their rows, in job order (whatever the workers), as a `PayoffTable`.
+
+    A pool plays each seed of a job as its own task (the rows are the same: `run_job` builds
+    policies afresh per seed), which keeps both workers busy to the end.
 
     Args:
         jobs: the cells to play.
-        workers: 1 runs in this process; more runs a `ProcessPoolExecutor` of that many workers.
-        progress: show a tqdm bar (on stderr).
-        start_method: ``"forkserver"`` or ``"spawn"`` (never fork: simulators and torch hold
+        workers: 1 plays in this process; more plays in a `ProcessPoolExecutor`.
+        progress: show a tqdm progress bar on stderr.
+        start_method: ``"forkserver"`` or ``"spawn"`` (not fork: simulators and torch hold
             threads and GL contexts that do not survive it).
+
     """
     from tqdm.auto import tqdm
 
     jobs = list(jobs)
     if not all(isinstance(j, EvalJob) for j in jobs):
         raise ConfigError("evaluate() takes EvalJob objects; build them with population_jobs().")
-    if not isinstance(workers, int) or workers < 1:
+    if type(workers) is not int or workers < 1:
         raise ConfigError(f"workers must be an int >= 1, got {workers!r}.")
     if start_method not in ("forkserver", "spawn"):
         raise ConfigError(f"start_method must be 'forkserver' or 'spawn', got {start_method!r}.")
-    out: list[list[dict[str, Any]]] = [[] for _ in jobs]
-    log.info("evaluating %d jobs on %d worker(s)", len(jobs), workers)
-    with tqdm(total=len(jobs), desc="evaluate", unit="job", file=sys.stderr,
-              disable=not progress) as bar:
-        if workers == 1 or len(jobs) <= 1:
-            for i, job in enumerate(jobs):
-                out[i] = run_job(job)
-                bar.update()
+    pool = workers > 1 and sum(len(j.seeds) for j in jobs) > 1
+    units = [dataclasses.replace(j, seeds=(s,)) for j in jobs for s in j.seeds] if pool else jobs
+    log.info("evaluating %d jobs (%d tasks) on %d worker(s)", len(jobs), len(units), workers)
+    with tqdm(total=len(units), desc="evaluate", file=sys.stderr, disable=not progress) as bar:
+        if pool:
+            out = _pool_map([_pickled(j) for j in units], workers, start_method, bar)
         else:
-            blobs = [_pickled(j) for j in jobs]
-            ctx = multiprocessing.get_context(start_method)
-            with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=ctx,
-                                     initializer=_init_worker, initargs=(list(sys.path),)) as pool:
-                futures = {pool.submit(_run_pickled, b): i for i, b in enumerate(blobs)}
-                try:
-                    for fut in as_completed(futures):
-                        out[futures[fut]] = fut.result()
-                        bar.update()
-                except BaseException:
-                    pool.shutdown(wait=False, cancel_futures=True)
-                    raise
-    return PayoffTable([row for rows in out for row in rows])
+            out = []
+            for job in units:
+                out.append(run_job(job))
+                bar.update()
+    return PayoffTable(row for rows in out for row in rows)
 
 
 # -- the payoff table -----------------------------------------------------------------------
@@ -322,6 +364,8 @@ def _parse(key: str, text: str) -> Any:
         return text
     if key in _INT:
         return int(text)
+    if text in ("True", "False"):
+        return text == "True"
     try:
         return float(text)
     except ValueError:
@@ -340,6 +384,7 @@ class PayoffTable:
         >>> m = t.metrics(alpha=0.5)[0]
         >>> m["mean"], m["worst"], m["worst_adversary"], m["degradation"]
         (5.0, 4.0, 'push', 0.5)
+
     """
 
     def __init__(self, rows: Iterable[Mapping[str, Any]] = ()) -> None:
@@ -347,14 +392,14 @@ class PayoffTable:
         for r in self.rows:
             missing = {"protagonist", "adversary", "seed", "true_return"} - r.keys()
             if missing:
-                raise ConfigError(f"Payoff row {r} lacks columns {sorted(missing)}.")
+                raise ConfigError(f"Payoff row {r} lacks the columns {sorted(missing)}.")
 
     def __len__(self) -> int:
         return len(self.rows)
 
     def __repr__(self) -> str:
-        return (f"PayoffTable({len(self.rows)} rows, protagonists={self.protagonists}, "
-                f"adversaries={self.adversaries})")
+        ps, adv = self.protagonists, self.adversaries
+        return f"PayoffTable({len(self)} rows, protagonists={ps}, adversaries={adv})"
 
     @property
     def protagonists(self) -> list[str]:
@@ -367,82 +412,92 @@ class PayoffTable:
         return list(dict.fromkeys(r["adversary"] for r in self.rows))
 
     def columns(self) -> list[str]:
-        """`COLUMNS` present in the rows, then any extra (tag) columns, sorted."""
+        """Return the `COLUMNS` present in the rows, then the other (tag) columns, sorted."""
         keys = dict.fromkeys(k for r in self.rows for k in r)
         return [c for c in COLUMNS if c in keys] + sorted(k for k in keys if k not in COLUMNS)
 
     def values(self, protagonist: str, adversary: str, column: str = "true_return") -> np.ndarray:
-        """`column` of every episode of one cell (empty if the cell was not played)."""
-        return np.array([float(r[column]) for r in self.rows
-                         if r["protagonist"] == protagonist and r["adversary"] == adversary])
+        """Return `column` of every episode of one cell (empty if the cell was not played)."""
+        rows = self.rows
+        sel = [r for r in rows if r["protagonist"] == protagonist and r["adversary"] == adversary]
+        return np.array([float(r[column]) for r in sel])
 
     def seed_means(self, protagonist: str, adversary: str) -> np.ndarray:
-        """The cell's mean true return per seed (the samples its interval is computed over)."""
+        """Return a cell's mean true return per seed (what its interval is computed over)."""
         by_seed: dict[Any, list[float]] = {}
         for r in self.rows:
             if r["protagonist"] == protagonist and r["adversary"] == adversary:
                 by_seed.setdefault(r["seed"], []).append(float(r["true_return"]))
         return np.array([np.mean(v) for v in by_seed.values()])
 
-    def matrix(self, stat: str = "mean", column: str = "true_return",
-               ) -> tuple[list[str], list[str], np.ndarray]:
-        """``(protagonists, adversaries, M)``: `stat` of `column` over each cell's episodes.
+    def matrix(
+        self, stat: str = "mean", column: str = "true_return"
+    ) -> tuple[list[str], list[str], np.ndarray]:
+        """Return ``(protagonists, adversaries, M)``, M the `stat` of `column` in each cell.
 
-        `stat` is ``"mean"``, ``"median"``, ``"std"``, ``"min"`` or ``"max"``; cells not
-        played are nan.
+        `stat` is ``"mean"``, ``"median"``, ``"std"``, ``"min"`` or ``"max"`` over the cell's
+        episodes; cells not played are nan.
         """
-        fns = {"mean": np.mean, "median": np.median, "std": np.std, "min": np.min, "max": np.max}
+        fns: dict[str, Callable[..., Any]] = {
+            "mean": np.mean,
+            "median": np.median,
+            "std": np.std,
+            "min": np.min,
+            "max": np.max,
+        }
         if stat not in fns:
-            raise ConfigError(f"Unknown stat {stat!r}.{did_you_mean(stat, fns)} Known: {sorted(fns)}.")
+            raise ConfigError(f"Unknown stat {stat!r}.{did_you_mean(stat, fns)} Use {sorted(fns)}.")
         ps, adv = self.protagonists, self.adversaries
         m = np.full((len(ps), len(adv)), np.nan)
         for (i, p), (j, a) in itertools.product(enumerate(ps), enumerate(adv)):
             v = self.values(p, a, column)
-            if v.size:
-                m[i, j] = fns[stat](v)
+            m[i, j] = fns[stat](v) if v.size else np.nan
         return ps, adv, m
 
     def cells(self) -> list[dict[str, Any]]:
-        """Per cell: episodes, seeds, mean, std and 95 % interval half-width over seed means."""
+        """Per played cell: episodes, seeds, mean, min, max; std and ci95 over seed means."""
         out = []
         for p, a in itertools.product(self.protagonists, self.adversaries):
             v, s = self.values(p, a), self.seed_means(p, a)
             if v.size:
-                out.append({"protagonist": p, "adversary": a, "episodes": v.size, "seeds": s.size,
-                            "mean": float(v.mean()), "std": float(s.std(ddof=1)) if s.size > 1 else math.nan,
-                            "ci95": ci95(s), "min": float(v.min()), "max": float(v.max())})
+                std = float(s.std(ddof=1)) if s.size > 1 else math.nan
+                stats = {"mean": v.mean(), "std": std, "ci95": ci95(s)}
+                stats.update({"min": v.min(), "max": v.max()})
+                cell = {"protagonist": p, "adversary": a, "episodes": v.size, "seeds": s.size}
+                out.append({**cell, **{k: float(x) for k, x in stats.items()}})
         return out
 
     def metrics(self, alpha: float = 0.1, nominal: str = NOMINAL) -> list[dict[str, Any]]:
-        """Robust metrics per protagonist, on the true return.
+        """Return robust metrics of the true return, one dict per protagonist.
 
-        ``nominal``: mean in the `nominal` column (nan if absent). Over the other columns:
-        ``mean`` of all their episodes, ``worst`` the lowest cell mean (`worst_case`) and
-        ``worst_adversary`` its column, ``cvar`` the `cvar` of all their episodes;
-        ``degradation``/``worst_degradation`` of mean/worst from nominal (`degradation`);
-        ``nominal_ci95``/``worst_ci95`` the interval half-widths over seeds of those cells.
+        ``nominal``: the mean in the `nominal` column (nan if absent). Over all other columns:
+        ``mean`` of their episodes; ``worst`` the lowest cell mean (`worst_case`), in column
+        ``worst_adversary``; ``cvar`` the `cvar` of their episodes; ``degradation`` and
+        ``worst_degradation`` of mean and worst from nominal (`degradation`); ``nominal_ci95``
+        and ``worst_ci95`` the 95 % half-widths over seeds of those two cells (`ci95`).
         """
         rows = []
         for p in self.protagonists:
-            cells = {a: self.values(p, a) for a in self.adversaries}
-            others = {a: v for a, v in cells.items() if v.size and a != nominal}
-            nom = float(cells[nominal].mean()) if nominal in cells and cells[nominal].size else math.nan
-            pooled = np.concatenate(list(others.values())) if others else np.zeros(0)
-            means = {a: float(v.mean()) for a, v in others.items()}
+            nom_v = self.values(p, nominal)
+            cells = {a: self.values(p, a) for a in self.adversaries if a != nominal}
+            means = {a: float(v.mean()) for a, v in cells.items() if v.size}
+            pooled = np.concatenate([cells[a] for a in means]) if means else np.zeros(0)
+            nom = float(nom_v.mean()) if nom_v.size else math.nan
             worst_adv = min(means, key=means.__getitem__) if means else ""
-            worst = worst_case(means) if means else math.nan
-            mean = float(pooled.mean()) if pooled.size else math.nan
-            rows.append({
-                "protagonist": p, "nominal": nom, "mean": mean, "worst": worst,
-                "worst_adversary": worst_adv, "cvar": cvar(pooled, alpha) if pooled.size else math.nan,
-                "degradation": degradation(nom, mean), "worst_degradation": degradation(nom, worst),
-                "nominal_ci95": ci95(self.seed_means(p, nominal)),
-                "worst_ci95": ci95(self.seed_means(p, worst_adv)) if means else math.nan,
-                "adversaries": len(others), "episodes": int(pooled.size)})
+            worst = means[worst_adv] if means else math.nan
+            mean = float(pooled.mean()) if means else math.nan
+            row = {"protagonist": p, "nominal": nom, "mean": mean, "worst": worst}
+            row["worst_adversary"] = worst_adv
+            row["cvar"] = cvar(pooled, alpha) if means else math.nan
+            row["degradation"] = degradation(nom, mean)
+            row["worst_degradation"] = degradation(nom, worst)
+            row["nominal_ci95"] = ci95(self.seed_means(p, nominal))
+            row["worst_ci95"] = ci95(self.seed_means(p, worst_adv))
+            rows.append({**row, "adversaries": len(means), "episodes": int(pooled.size)})
         return rows
 
     def to_csv(self, path: str | Path) -> Path:
-        """Write the rows as CSV (`columns` order; missing tags are empty); returns the path."""
+        """Write the rows as CSV (`columns` order; missing tags left empty); return the path."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         with path.open("w", newline="") as f:
@@ -455,10 +510,11 @@ class PayoffTable:
     def from_csv(cls, path: str | Path) -> PayoffTable:
         """Read a table written by `to_csv` (numbers parsed back; empty cells dropped)."""
         with Path(path).open(newline="") as f:
-            return cls({k: _parse(k, v) for k, v in r.items() if v != ""} for r in csv.DictReader(f))
+            rows = list(csv.DictReader(f))
+        return cls({k: _parse(k, v) for k, v in r.items() if v != ""} for r in rows)
 
     def to_json(self, path: str | Path) -> Path:
-        """Write ``{"columns": [...], "rows": [...]}`` as JSON; returns the path."""
+        """Write ``{"columns": [...], "rows": [...]}`` as JSON; return the path."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"columns": self.columns(), "rows": self.rows}, indent=1))
@@ -468,3 +524,149 @@ class PayoffTable:
     def from_json(cls, path: str | Path) -> PayoffTable:
         """Read a table written by `to_json`."""
         return cls(json.loads(Path(path).read_text())["rows"])
+
+
+# -- building populations of jobs -----------------------------------------------------------
+@dataclass(frozen=True)
+class AdversarySetup:
+    """One adversary column of a payoff matrix: how its game is made and who plays whom."""
+
+    make_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    """`advgame.make` options (``preset=``/``disruptors=``); see `EvalJob.make_kwargs`."""
+    specs: Mapping[str, Any] = field(default_factory=dict)
+    """``{adversary agent id: spec}``; see `EvalJob.adversary_specs`."""
+    tags: Mapping[str, Any] = field(default_factory=dict)
+    """Extra row columns; see `EvalJob.tags`."""
+
+    @classmethod
+    def nominal(cls) -> AdversarySetup:
+        """Return the undisrupted game (no adversary agents at all)."""
+        return cls({"disruptors": {}})
+
+    @classmethod
+    def from_preset(cls, scenario: str, preset: str) -> AdversarySetup:
+        """Return a preset played by its suggested adversaries (`Preset.adversaries`)."""
+        from advgame.registry import scenario_spec
+
+        presets = scenario_spec(scenario).load_presets()
+        if preset not in presets:
+            hint = did_you_mean(preset, presets)
+            msg = f"Scenario {scenario!r} has no preset {preset!r}.{hint} Presets: {list(presets)}"
+            raise UnknownNameError(msg)
+        return cls({"preset": preset}, dict(presets[preset].adversaries))
+
+
+def population_jobs(
+    scenario: str,
+    protagonists: Mapping[str, Any],
+    adversaries: Mapping[str, AdversarySetup],
+    *,
+    seeds: Sequence[int] = (0,),
+    episodes: int = 1,
+) -> list[EvalJob]:
+    """Return one `EvalJob` per (protagonist, adversary) pair: the whole payoff matrix.
+
+    `protagonists` maps names to specs (`EvalJob.protagonist_spec`), `adversaries` names to
+    `AdversarySetup`s (name one `NOMINAL` for the degradation metrics); `seeds` and `episodes`
+    are those of every job.
+    """
+    bad = [n for n, s in adversaries.items() if not isinstance(s, AdversarySetup)]
+    if bad:
+        example = "AdversarySetup.from_preset(scenario, 'state-gauss-0.1')"
+        raise ConfigError(f"adversaries {bad} must be AdversarySetup values, e.g. {example}.")
+    return [
+        EvalJob(scenario=scenario, make_kwargs=s.make_kwargs, protagonist=p, protagonist_spec=spec,
+                adversary=a, adversary_specs=s.specs, seeds=tuple(seeds), episodes=episodes,
+                tags=s.tags)
+        for p, spec in protagonists.items()
+        for a, s in adversaries.items()
+    ]  # fmt: skip
+
+
+def _gaussian(budget: float) -> Any:
+    from advgame.adversaries import GaussianAdversary
+
+    return GaussianAdversary(std=budget)
+
+
+def budget_sweep(
+    scenario: str,
+    protagonists: Mapping[str, Any],
+    budgets: Sequence[float],
+    *,
+    kind: str = "observation",
+    seeds: Sequence[int] = (0,),
+    episodes: int = 1,
+    adversary: Callable[[float], Any] = _gaussian,
+    make_kwargs: Mapping[str, Any] | None = None,
+) -> list[EvalJob]:
+    """Return jobs for a "return vs budget" curve: each protagonist against each budget.
+
+    Budget ``b`` is the column ``f"{kind}-{b:g}"`` with row tag ``budget=b``: an unbounded
+    `kind` disruptor (the paper's random mode) played by ``adversary(b)``, by default
+    ``GaussianAdversary(std=b)``. `make_kwargs` adds task options (``max_episode_steps``).
+
+    Example:
+        >>> jobs = budget_sweep("Hopper-v5", {"zero": abs}, [0.0, 0.05, 0.1, 0.15])
+        >>> [(j.adversary, j.tags["budget"]) for j in jobs][:2]
+        [('observation-0', 0.0), ('observation-0.05', 0.05)]
+
+    """
+    if kind not in ("observation", "action", "reward"):
+        raise ConfigError(f"budget_sweep perturbs observation, action or reward; got {kind!r}.")
+    if not budgets or any(not math.isfinite(b) or b < 0 for b in budgets):
+        raise ConfigError(f"budgets must be finite and >= 0, got {budgets!r}; e.g. [0, 0.1].")
+    kw = {**(make_kwargs or {}), "disruptors": {kind: {"bounded": False}}}
+    agent = f"{kind}_adversary"
+    setups = {
+        f"{kind}-{b:g}": AdversarySetup(kw, {agent: adversary(float(b))}, {"budget": float(b)})
+        for b in budgets
+    }
+    return population_jobs(scenario, protagonists, setups, seeds=seeds, episodes=episodes)
+
+
+def shift_grid(scenario: str, preset: str, points: int = 3) -> Iterator[tuple[str, dict]]:
+    """Return a grid over a preset's dynamics intervals: ``(name, {agent: ConstantAdversary})``.
+
+    Each parameter takes `points` evenly spaced values from its interval's low to its high end,
+    both included; the grid, built lazily, is the product over all parameters of all dynamics
+    adversaries. Play an entry with ``AdversarySetup({"preset": preset}, specs)``.
+
+    Example:
+        >>> [n for n, _ in shift_grid("Ant-v5", "shift-uniform", points=2)][:2]
+        ['gravity=9.81,wind=0.8', 'gravity=9.81,wind=1.2']
+
+    """
+    import advgame
+    from advgame.disruptors import DynamicsDisruptor
+    from advgame.disruptors.dynamics import DynamicsRuntime
+
+    if type(points) is not int or points < 2:
+        raise ConfigError(f"points must be an int >= 2 (both interval ends), got {points!r}.")
+    game = advgame.make(scenario, preset=preset)
+    game.close()
+    dyn = {a: d for a, d in game.disruptors.items() if isinstance(d, DynamicsRuntime)}
+    if not dyn:
+        raise ConfigError(
+            f"Preset {preset!r} of {scenario!r} has no dynamics disruptor (adversaries: "
+            f"{list(game.adversaries)}); use a shift preset, e.g. preset='shift-uniform'."
+        )
+    axes, labels = [], []
+    for agent, d in dyn.items():
+        params = cast(DynamicsDisruptor, d.spec).params
+        for p, lo, hi in zip(params, d.low, d.high, strict=True):
+            axes.append([(agent, float(v)) for v in dict.fromkeys(np.linspace(lo, hi, points))])
+            where = f"[{','.join(p.names)}]" if p.names else ""
+            labels.append(f"{agent}." * (len(dyn) > 1) + p.kind + where)
+    return _grid(axes, labels)
+
+
+def _grid(axes: list[list[tuple[str, float]]], labels: list[str]) -> Iterator[tuple[str, dict]]:
+    from advgame.adversaries import ConstantAdversary
+
+    for combo in itertools.product(*axes):
+        values: dict[str, list[float]] = {}
+        for agent, v in combo:
+            values.setdefault(agent, []).append(v)
+        name = ",".join(f"{lab}={v:.6g}" for lab, (_, v) in zip(labels, combo, strict=True))
+        yield name, {a: ConstantAdversary(tuple(vs)) for a, vs in values.items()}
