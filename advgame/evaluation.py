@@ -15,10 +15,8 @@ the *true* return: nominal, mean, worst case, CVaR and the degradation from nomi
 from __future__ import annotations
 
 import contextlib
-import csv
 import dataclasses
 import itertools
-import json
 import logging
 import math
 import multiprocessing
@@ -29,12 +27,20 @@ import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
 
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
+from advgame.payoff import (
+    COLUMNS,
+    NOMINAL,
+    PayoffTable,
+    ci95,
+    cvar,
+    degradation,
+    worst_case,
+)
 
 __all__ = [
     "COLUMNS",
@@ -59,78 +65,9 @@ log = logging.getLogger(__name__)
 SEED_STRIDE = 10_000
 """Episode ``i`` of evaluation seed ``s`` plays `rollout` seed ``s * SEED_STRIDE + i``, so the
 episodes of seeds 0, 1, 2, ... never share a reset seed (as ``s + i`` would)."""
-NOMINAL = "nominal"
-"""The adversary name of the undisrupted game, the reference of `degradation`."""
-COLUMNS: tuple[str, ...] = ("scenario", "protagonist", "adversary", "seed", "episode")
-COLUMNS += ("true_return", "observed_return", "cost", "payoff", "length", "clipped", "terminated")
-"""The columns of every row (`advgame.rollout.EpisodeResult`, clips summed); tags add more."""
 _PRELOAD = ("advgame.evaluation", "advgame.rollout", "advgame.scenarios.mujoco", "mujoco")
-_INT, _STR = {"seed", "episode", "length", "clipped"}, {"scenario", "protagonist", "adversary"}
-# Student t 0.975 quantiles for df = 1..30 (95 % two-sided intervals); 1.96 beyond.
-_T975: tuple[float, ...] = (
-    12.706,
-    4.303,
-    3.182,
-    2.776,
-    2.571,
-    2.447,
-    2.365,
-    2.306,
-    2.262,
-    2.228,
-    2.201,
-    2.179,
-)
-_T975 += (2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064)
-_T975 += (2.060, 2.056, 2.052, 2.048, 2.045, 2.042)
 
 
-# -- metrics: pure functions ----------------------------------------------------------------
-def cvar(values: Sequence[float] | np.ndarray, alpha: float = 0.1) -> float:
-    """Return CVaR_α of returns: the mean of the ``k = ⌈α·n⌉`` lowest of the ``n`` values.
-
-    ``α·n`` is rounded to 9 decimals before the ceiling, so ``α = 0.3, n = 10`` takes the 3
-    lowest (not 4 through floating-point error). ``α = 1`` is the plain mean.
-
-    Example:
-        >>> cvar([5.0, 1.0, 3.0, 2.0], alpha=0.5)
-        1.5
-
-    """
-    v = np.sort(np.asarray(values, dtype=np.float64).ravel())
-    if not 0.0 < alpha <= 1.0:
-        raise ConfigError(f"CVaR needs 0 < alpha <= 1, got alpha={alpha!r}; e.g. alpha=0.1.")
-    if v.size == 0:
-        raise ConfigError("CVaR of no values is undefined; evaluate at least one episode.")
-    k = max(1, math.ceil(round(alpha * v.size, 9)))
-    return float(v[:k].mean())
-
-
-def worst_case(cell_means: Mapping[str, float] | Sequence[float]) -> float:
-    """Return the worst-case return: the lowest per-adversary cell mean (nan if one is nan)."""
-    vals = list(cell_means.values()) if isinstance(cell_means, Mapping) else list(cell_means)
-    if not vals:
-        raise ConfigError("worst_case needs at least one cell mean, got none.")
-    return float(np.min(np.asarray(vals, dtype=np.float64)))
-
-
-def degradation(nominal: float, value: float) -> float:
-    """Return the relative loss ``(nominal - value) / |nominal|``; nan if nominal is 0 or nan."""
-    if not math.isfinite(nominal) or nominal == 0:
-        return math.nan
-    return (nominal - value) / abs(nominal)
-
-
-def ci95(values: Sequence[float] | np.ndarray) -> float:
-    """Return the half-width of the 95 % Student-t interval of the mean (nan for n < 2)."""
-    v = np.asarray(values, dtype=np.float64)
-    if v.size < 2:
-        return math.nan
-    t = _T975[v.size - 2] if v.size - 1 <= len(_T975) else 1.96
-    return float(t * v.std(ddof=1) / math.sqrt(v.size))
-
-
-# -- jobs -----------------------------------------------------------------------------------
 def _check_spec(spec: Any, what: str) -> None:
     if not (hasattr(spec, "build") or hasattr(spec, "act") or callable(spec)):
         msg = "expected a PolicySpec (build), a Policy (reset/act) or a callable obs -> action"
@@ -356,174 +293,6 @@ def evaluate(
                 out.append(run_job(job))
                 bar.update()
     return PayoffTable(row for rows in out for row in rows)
-
-
-# -- the payoff table -----------------------------------------------------------------------
-def _parse(key: str, text: str) -> Any:
-    if key in _STR:
-        return text
-    if key in _INT:
-        return int(text)
-    if text in ("True", "False"):
-        return text == "True"
-    try:
-        return float(text)
-    except ValueError:
-        return text
-
-
-class PayoffTable:
-    """Episode rows (protagonist × adversary × seed × episode) and the robust metrics on them.
-
-    Args:
-        rows: dicts with at least ``protagonist``, ``adversary``, ``seed`` and ``true_return``.
-
-    Example:
-        >>> t = PayoffTable([{"protagonist": "p", "adversary": a, "seed": 0, "true_return": r}
-        ...                  for a, r in [("nominal", 10.0), ("gauss", 6.0), ("push", 4.0)]])
-        >>> m = t.metrics(alpha=0.5)[0]
-        >>> m["mean"], m["worst"], m["worst_adversary"], m["degradation"]
-        (5.0, 4.0, 'push', 0.5)
-
-    """
-
-    def __init__(self, rows: Iterable[Mapping[str, Any]] = ()) -> None:
-        self.rows: list[dict[str, Any]] = [dict(r) for r in rows]
-        for r in self.rows:
-            missing = {"protagonist", "adversary", "seed", "true_return"} - r.keys()
-            if missing:
-                raise ConfigError(f"Payoff row {r} lacks the columns {sorted(missing)}.")
-
-    def __len__(self) -> int:
-        return len(self.rows)
-
-    def __repr__(self) -> str:
-        ps, adv = self.protagonists, self.adversaries
-        return f"PayoffTable({len(self)} rows, protagonists={ps}, adversaries={adv})"
-
-    @property
-    def protagonists(self) -> list[str]:
-        """Protagonist names in order of first appearance."""
-        return list(dict.fromkeys(r["protagonist"] for r in self.rows))
-
-    @property
-    def adversaries(self) -> list[str]:
-        """Adversary names in order of first appearance."""
-        return list(dict.fromkeys(r["adversary"] for r in self.rows))
-
-    def columns(self) -> list[str]:
-        """Return the `COLUMNS` present in the rows, then the other (tag) columns, sorted."""
-        keys = dict.fromkeys(k for r in self.rows for k in r)
-        return [c for c in COLUMNS if c in keys] + sorted(k for k in keys if k not in COLUMNS)
-
-    def values(self, protagonist: str, adversary: str, column: str = "true_return") -> np.ndarray:
-        """Return `column` of every episode of one cell (empty if the cell was not played)."""
-        rows = self.rows
-        sel = [r for r in rows if r["protagonist"] == protagonist and r["adversary"] == adversary]
-        return np.array([float(r[column]) for r in sel])
-
-    def seed_means(self, protagonist: str, adversary: str) -> np.ndarray:
-        """Return a cell's mean true return per seed (what its interval is computed over)."""
-        by_seed: dict[Any, list[float]] = {}
-        for r in self.rows:
-            if r["protagonist"] == protagonist and r["adversary"] == adversary:
-                by_seed.setdefault(r["seed"], []).append(float(r["true_return"]))
-        return np.array([np.mean(v) for v in by_seed.values()])
-
-    def matrix(
-        self, stat: str = "mean", column: str = "true_return"
-    ) -> tuple[list[str], list[str], np.ndarray]:
-        """Return ``(protagonists, adversaries, M)``, M the `stat` of `column` in each cell.
-
-        `stat` is ``"mean"``, ``"median"``, ``"std"``, ``"min"`` or ``"max"`` over the cell's
-        episodes; cells not played are nan.
-        """
-        fns: dict[str, Callable[..., Any]] = {
-            "mean": np.mean,
-            "median": np.median,
-            "std": np.std,
-            "min": np.min,
-            "max": np.max,
-        }
-        if stat not in fns:
-            raise ConfigError(f"Unknown stat {stat!r}.{did_you_mean(stat, fns)} Use {sorted(fns)}.")
-        ps, adv = self.protagonists, self.adversaries
-        m = np.full((len(ps), len(adv)), np.nan)
-        for (i, p), (j, a) in itertools.product(enumerate(ps), enumerate(adv)):
-            v = self.values(p, a, column)
-            m[i, j] = fns[stat](v) if v.size else np.nan
-        return ps, adv, m
-
-    def cells(self) -> list[dict[str, Any]]:
-        """Per played cell: episodes, seeds, mean, min, max; std and ci95 over seed means."""
-        out = []
-        for p, a in itertools.product(self.protagonists, self.adversaries):
-            v, s = self.values(p, a), self.seed_means(p, a)
-            if v.size:
-                std = float(s.std(ddof=1)) if s.size > 1 else math.nan
-                stats = {"mean": v.mean(), "std": std, "ci95": ci95(s)}
-                stats.update({"min": v.min(), "max": v.max()})
-                cell = {"protagonist": p, "adversary": a, "episodes": v.size, "seeds": s.size}
-                out.append({**cell, **{k: float(x) for k, x in stats.items()}})
-        return out
-
-    def metrics(self, alpha: float = 0.1, nominal: str = NOMINAL) -> list[dict[str, Any]]:
-        """Return robust metrics of the true return, one dict per protagonist.
-
-        ``nominal``: the mean in the `nominal` column (nan if absent). Over all other columns:
-        ``mean`` of their episodes; ``worst`` the lowest cell mean (`worst_case`), in column
-        ``worst_adversary``; ``cvar`` the `cvar` of their episodes; ``degradation`` and
-        ``worst_degradation`` of mean and worst from nominal (`degradation`); ``nominal_ci95``
-        and ``worst_ci95`` the 95 % half-widths over seeds of those two cells (`ci95`).
-        """
-        rows = []
-        for p in self.protagonists:
-            nom_v = self.values(p, nominal)
-            cells = {a: self.values(p, a) for a in self.adversaries if a != nominal}
-            means = {a: float(v.mean()) for a, v in cells.items() if v.size}
-            pooled = np.concatenate([cells[a] for a in means]) if means else np.zeros(0)
-            nom = float(nom_v.mean()) if nom_v.size else math.nan
-            worst_adv = min(means, key=means.__getitem__) if means else ""
-            worst = means[worst_adv] if means else math.nan
-            mean = float(pooled.mean()) if means else math.nan
-            row = {"protagonist": p, "nominal": nom, "mean": mean, "worst": worst}
-            row["worst_adversary"] = worst_adv
-            row["cvar"] = cvar(pooled, alpha) if means else math.nan
-            row["degradation"] = degradation(nom, mean)
-            row["worst_degradation"] = degradation(nom, worst)
-            row["nominal_ci95"] = ci95(self.seed_means(p, nominal))
-            row["worst_ci95"] = ci95(self.seed_means(p, worst_adv))
-            rows.append({**row, "adversaries": len(means), "episodes": int(pooled.size)})
-        return rows
-
-    def to_csv(self, path: str | Path) -> Path:
-        """Write the rows as CSV (`columns` order; missing tags left empty); return the path."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=self.columns(), restval="")
-            writer.writeheader()
-            writer.writerows(self.rows)
-        return path
-
-    @classmethod
-    def from_csv(cls, path: str | Path) -> PayoffTable:
-        """Read a table written by `to_csv` (numbers parsed back; empty cells dropped)."""
-        with Path(path).open(newline="") as f:
-            rows = list(csv.DictReader(f))
-        return cls({k: _parse(k, v) for k, v in r.items() if v != ""} for r in rows)
-
-    def to_json(self, path: str | Path) -> Path:
-        """Write ``{"columns": [...], "rows": [...]}`` as JSON; return the path."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"columns": self.columns(), "rows": self.rows}, indent=1))
-        return path
-
-    @classmethod
-    def from_json(cls, path: str | Path) -> PayoffTable:
-        """Read a table written by `to_json`."""
-        return cls(json.loads(Path(path).read_text())["rows"])
 
 
 # -- building populations of jobs -----------------------------------------------------------
