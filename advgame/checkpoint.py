@@ -64,7 +64,9 @@ class SB3Policy:
         self.mean = obs_mean
         self.std = None if obs_var is None else np.sqrt(obs_var + epsilon)
         self.clip_obs = clip_obs
-        self._seeded = False
+        self._ready = False
+        self._box: tuple[np.ndarray, np.ndarray] | None = None
+        self._squash = False
 
     @property
     def observation_std(self) -> np.ndarray | None:
@@ -85,8 +87,29 @@ class SB3Policy:
             obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs).astype(
                 np.float32
             )
-        action, _ = self.model.predict(obs, deterministic=self.deterministic)
-        return action
+        return self._predict(obs)
+
+    def _predict(self, obs: np.ndarray) -> Any:
+        """SB3's ``predict`` for one flat observation, without its batching and checks.
+
+        Frozen opponents call this every step, so the per-call overhead matters: the network
+        runs under ``no_grad`` in eval mode and a Box action is clipped as SB3 does.
+        """
+        import torch
+
+        policy = self.model.policy
+        if not self._ready:
+            policy.set_training_mode(False)
+            space = self.model.action_space
+            self._box = (space.low, space.high) if hasattr(space, "low") else None
+            self._squash = bool(getattr(policy, "squash_output", False))
+            self._ready = True
+        with torch.no_grad():
+            action = policy._predict(torch.as_tensor(obs[None]), deterministic=self.deterministic)
+        out = action.cpu().numpy()[0]
+        if self._box is not None:
+            out = policy.unscale_action(out) if self._squash else np.clip(out, *self._box)
+        return out
 
 
 @dataclass(frozen=True)

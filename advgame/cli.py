@@ -108,7 +108,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``advgame`` (exposed for documentation and tests)."""
-    from advgame.config import add_arguments
+    from advgame.config import add_arguments, field_docs, scalar_field
     from advgame.training import METHODS, TrainConfig
 
     parser = argparse.ArgumentParser(
@@ -144,7 +144,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--set",
         action="append",
         metavar="KEY=VALUE",
-        help="override any config field, JSON values: --set protagonist_hparams='{\"n_steps\": 512}'",
+        help='override any config field with a JSON value, e.g. --set protagonist_hparams=\'{"n_steps": '
+        "512}'. Fields without their own flag: "
+        + "; ".join(
+            f"{name}: {doc}"
+            for name, doc in field_docs(TrainConfig).items()
+            if not scalar_field(TrainConfig, name)
+        ),
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_arguments(p, TrainConfig)
@@ -214,6 +220,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AdvgameError as exc:
         print(f"advgame {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # e.g. `advgame list | head`
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print(
             f"advgame {args.command}: interrupted; a training run can be continued with "

@@ -27,6 +27,7 @@ __all__ = [
     "load_json",
     "override",
     "save_json",
+    "scalar_field",
     "to_dict",
 ]
 
@@ -145,6 +146,11 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
                 if typing.get_origin(hint) is typing.Literal
                 else None,
             )
+
+
+def scalar_field(cls: type, name: str) -> bool:
+    """Whether field `name` of `cls` gets its own command-line flag (a scalar or a Literal)."""
+    return _scalar(typing.get_type_hints(cls)[name]) is not None
 
 
 def _scalar(hint: Any) -> type | None:

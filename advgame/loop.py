@@ -140,7 +140,10 @@ class Run:
         game = make(self.cfg.scenario, preset=self.cfg.preset, phase="eval")
         seed = self.cfg.seed + 100_000 + it
         nominal = rollout(game, protagonists, seed=seed, episodes=self.cfg.eval_episodes)
-        attackers = {**t.fixed, **{a: t.population.of(a)[-1].spec for a in t.learned}}
+        attackers = {
+            **t.fixed,
+            **{a: t.latest.get(a, t.population.of(a)[-1].spec) for a in t.learned},
+        }
         attacked = rollout(
             game, {**protagonists, **attackers}, seed=seed, episodes=self.cfg.eval_episodes
         )
@@ -170,18 +173,19 @@ class Run:
             p: ConstantPolicy(filler_action(game.action_space(p))) for p in t.protagonists
         }
         game.close()
-        specs = [
-            (PROTAGONISTS, self.prot_cfg, dict(t.fixed), cfg.protagonist_steps + cfg.warmup_steps)
-        ]
+        run_steps = cfg.protagonist_steps * cfg.iterations + cfg.warmup_steps
+        specs = [(PROTAGONISTS, self.prot_cfg, dict(t.fixed), run_steps)]
         for a in t.learned:
             others = {k: v for k, v in t.fixed.items() if k != a}
-            specs.append((a, self.adv_cfg, {**placeholders, **others}, cfg.adversary_steps))
+            specs.append(
+                (a, self.adv_cfg, {**placeholders, **others}, cfg.adversary_steps * cfg.iterations)
+            )
         tb = str(self.dir / "tb")
-        for k, (agent, learner, policies, per_iter) in enumerate(specs):
+        for k, (agent, learner, policies, total) in enumerate(specs):
             fns = self._env_fns(agent, policies)
             if agent == PROTAGONISTS and t.team:
                 t.sides[agent] = (
-                    learner.make_learner(fns, cfg.seed + k, per_iter * cfg.iterations, tb)
+                    learner.make_learner(fns, cfg.seed + k, total, tb)
                     if folder is None
                     else _load_team(folder, learner, fns, tb)
                 )
@@ -193,7 +197,7 @@ class Run:
                     learner,
                     fns,
                     cfg.seed + k,
-                    per_iter * cfg.iterations,
+                    total,
                     normalize=cfg.normalize,
                     tensorboard_log=tb,
                     vec_env=cfg.vec_env,

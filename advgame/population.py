@@ -20,9 +20,11 @@ import numpy as np
 from advgame.errors import ConfigError
 from advgame.registry import load
 
-__all__ = ["SAMPLING", "Member", "Population", "spec_from_dict", "spec_to_dict"]
+__all__ = ["PATH_FIELDS", "SAMPLING", "Member", "Population", "spec_from_dict", "spec_to_dict"]
 
 SAMPLING = ("latest", "uniform", "fictitious")
+PATH_FIELDS = ("path", "normalizer")
+"""Spec fields holding files; stored relative to the population file when inside its folder."""
 
 
 def spec_to_dict(spec: Any) -> dict[str, Any]:
@@ -64,8 +66,14 @@ class Member:
     meta: dict[str, Any] = field(default_factory=dict)
     """Free-form metadata (scenario, seed, returns at save time)."""
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form."""
+    def to_dict(self, base: Path | None = None) -> dict[str, Any]:
+        """JSON form; file paths under `base` are stored relative to it (a run can move)."""
+        spec = spec_to_dict(self.spec)
+        if base is not None:
+            fields = spec["fields"]
+            spec["fields"] = {
+                k: _relative(v, base) if k in PATH_FIELDS else v for k, v in fields.items()
+            }
         return {
             "id": self.id,
             "side": self.side,
@@ -73,21 +81,42 @@ class Member:
             "iteration": self.iteration,
             "learned": self.learned,
             "meta": self.meta,
-            "spec": spec_to_dict(self.spec),
+            "spec": spec,
         }
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Member:
-        """Inverse of `to_dict`."""
+    def from_dict(cls, data: dict[str, Any], base: Path | None = None) -> Member:
+        """Inverse of `to_dict`: relative file paths are resolved against `base`."""
+        spec = dict(data["spec"])
+        if base is not None:
+            fields = spec["fields"]
+            spec["fields"] = {
+                k: _absolute(v, base) if k in PATH_FIELDS else v for k, v in fields.items()
+            }
         return cls(
             data["id"],
             data["side"],
             data["agent"],
-            spec_from_dict(data["spec"]),
+            spec_from_dict(spec),
             data.get("iteration", -1),
             data.get("learned", True),
             data.get("meta", {}),
         )
+
+
+def _relative(value: Any, base: Path) -> Any:
+    if not isinstance(value, str):
+        return value
+    try:
+        return Path(value).resolve().relative_to(base.resolve()).as_posix()
+    except ValueError:  # outside the population's folder: keep it as given
+        return value
+
+
+def _absolute(value: Any, base: Path) -> Any:
+    if not isinstance(value, str) or Path(value).is_absolute():
+        return value
+    return str(base.resolve() / value)
 
 
 class Population:
@@ -140,7 +169,8 @@ class Population:
         """Write atomically (a crash leaves the old file or the new one, never half of one)."""
         path = Path(path)
         tmp = path.with_suffix(path.suffix + ".tmp")
-        tmp.write_text(json.dumps([m.to_dict() for m in self.members], indent=2) + "\n")
+        base = path.parent
+        tmp.write_text(json.dumps([m.to_dict(base) for m in self.members], indent=2) + "\n")
         os.replace(tmp, path)
 
     @classmethod
@@ -150,4 +180,5 @@ class Population:
             data = json.loads(Path(path).read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise ConfigError(f"Cannot read population {path}: {exc}") from exc
-        return cls([Member.from_dict(d) for d in data])
+        base = Path(path).parent
+        return cls([Member.from_dict(d, base) for d in data])

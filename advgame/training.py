@@ -17,9 +17,11 @@ from __future__ import annotations
 import csv
 import json
 import logging
+import math
 import os
 import shutil
 import time
+import typing
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -29,7 +31,7 @@ import numpy as np
 from advgame.config import load_json, save_json
 from advgame.errors import ConfigError
 from advgame.learning import EpisodeStats
-from advgame.population import SAMPLING, Member, Population
+from advgame.population import Member, Population
 from advgame.registry import load, make
 
 __all__ = ["METHODS", "TrainConfig", "Trainer", "learner_config", "resume", "train"]
@@ -45,9 +47,9 @@ PROTAGONISTS = "protagonists"
 _ZERO = "advgame.adversaries.noise:ZeroAdversary"
 
 METHODS: dict[str, dict[str, Any]] = {
-    "ppo": {"preset": "default", "learned": []},
-    "atla": {"preset": "atla"},
-    "rarl": {"preset": "rarl", "train_budget_scale": 0.5},
+    "ppo": {"preset": "default", "learned": [], "train_budget_scale": 1.0},
+    "atla": {"preset": "atla", "learned": None, "train_budget_scale": 1.0},
+    "rarl": {"preset": "rarl", "learned": None, "train_budget_scale": 0.5},
 }
 """Named starting points: plain PPO on the nominal task, ATLA (learned observation attack in
 normalized units) and RARL (learned forces, trained at half the bound, tested at full)."""
@@ -109,10 +111,31 @@ class TrainConfig:
                 raise ConfigError(
                     f"TrainConfig.{name} must be an int >= 0, got {getattr(self, name)!r}."
                 )
-        if self.sampling not in SAMPLING:
-            raise ConfigError(f"sampling must be one of {SAMPLING}, got {self.sampling!r}.")
-        if not 0 < self.train_budget_scale:
-            raise ConfigError(f"train_budget_scale must be > 0, got {self.train_budget_scale!r}.")
+        for name in ("protagonist_algo", "adversary_algo", "sampling", "vec_env"):
+            allowed = typing.get_args(typing.get_type_hints(TrainConfig)[name])
+            if getattr(self, name) not in allowed:
+                raise ConfigError(
+                    f"TrainConfig.{name} must be one of {allowed}, got {getattr(self, name)!r}."
+                )
+        if self.learned is not None and (
+            isinstance(self.learned, str) or not all(isinstance(a, str) for a in self.learned)
+        ):
+            raise ConfigError(
+                f"TrainConfig.learned must be None or a list of adversary ids, got {self.learned!r}"
+                ' (e.g. ["observation_adversary"]).'
+            )
+        scale = self.train_budget_scale
+        if (
+            isinstance(scale, bool)
+            or not isinstance(scale, (int, float))
+            or not 0 < scale < math.inf
+        ):
+            raise ConfigError(f"train_budget_scale must be a number > 0, got {scale!r}.")
+        for name in ("protagonist_hparams", "adversary_hparams"):
+            if getattr(self, name) is not None and not isinstance(getattr(self, name), dict):
+                raise ConfigError(
+                    f"TrainConfig.{name} must be a dict, got {getattr(self, name)!r}."
+                )
 
 
 def learner_config(algo: str, overrides: dict[str, Any] | None) -> Any:
@@ -183,6 +206,8 @@ class Trainer:
         self.iteration = 0
         self.sides: dict[str, Any] = {}
         """`PROTAGONISTS` -> the protagonist side; each learned adversary id -> its side."""
+        self.latest: dict[str, Any] = {}
+        """Each learned adversary's spec as saved this iteration (in the population or not)."""
 
     # -- the three steps --------------------------------------------------------------------
     def update_protagonists(self, stats: EpisodeStats) -> None:
@@ -221,10 +246,11 @@ class Trainer:
         )
         for agent in self.learned:
             spec = self.sides[agent].save(folder)
+            final = replace(
+                spec, path=spec.path.replace(".partial", ""), normalizer=_final(spec.normalizer)
+            )
+            self.latest[agent] = final
             if keep:
-                final = replace(
-                    spec, path=spec.path.replace(".partial", ""), normalizer=_final(spec.normalizer)
-                )
                 self.population.add(
                     Member(
                         f"{agent}@{self.iteration}",
@@ -268,9 +294,10 @@ def train(config: TrainConfig, run_dir: str | Path, progress: bool = True) -> Pa
     run_dir = Path(run_dir)
     if (run_dir / "state.json").exists():
         raise ConfigError(f"{run_dir} already holds a run; use resume (advgame resume {run_dir}).")
+    run = Run(Trainer(config, run_dir, progress))  # checks scenario, preset and learners first
     run_dir.mkdir(parents=True, exist_ok=True)
     save_json(config, run_dir / "config.json")
-    return Run(Trainer(config, run_dir, progress)).execute(fresh=True)
+    return run.execute(fresh=True)
 
 
 def resume(run_dir: str | Path, progress: bool = True) -> Path:

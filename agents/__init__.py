@@ -1,4 +1,4 @@
-"""Protagonist learners (Stable-Baselines3 wrappers and compact torch learners)."""
+"""Protagonist learners: Stable-Baselines3 PPO/SAC/TD3 configs, and MAPPO/IPPO for teams."""
 
 if __name__ != "advgame.agents":  # pragma: no cover - packaging guard
     raise ImportError(
@@ -6,6 +6,16 @@ if __name__ != "advgame.agents":  # pragma: no cover - packaging guard
         "(pip install -e . from the repository root), not as the bare `agents`."
     )
 
+from advgame.agents.marl import MARL_LEARNERS, IPPOConfig, MAPPOConfig, TeamLearner
 from advgame.agents.sb3 import LEARNERS, PPOConfig, SACConfig, TD3Config
 
-__all__ = ["LEARNERS", "PPOConfig", "SACConfig", "TD3Config"]
+__all__ = [
+    "LEARNERS",
+    "MARL_LEARNERS",
+    "IPPOConfig",
+    "MAPPOConfig",
+    "PPOConfig",
+    "SACConfig",
+    "TD3Config",
+    "TeamLearner",
+]

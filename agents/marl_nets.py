@@ -1,0 +1,385 @@
+"""The pieces of the multi-agent PPO learners: normalizers, networks, and saved actors as policies.
+
+* `RunningNorm`: a running mean/variance with SB3 `VecNormalize`'s semantics.
+* `RewardScaler`: divides each agent's reward by the std of its discounted return (SB3's reward
+  normalization), one running statistic per protagonist.
+* `TeamModel`: one `GaussianActor` per protagonist on its local observation, and the critic:
+  MAPPO's centralised critic on the global state (one value head per protagonist, since a reward
+  disruptor may perturb the agents' observed rewards differently; with a shared reward the heads
+  agree), or IPPO's one critic per protagonist on its local observation.
+* `TeamSnapshot` / `NumpyMLP`: numpy copies of the current networks for acting step by step
+  (torch's per-call overhead dominates 64-unit MLPs at batch sizes of a few views).
+* `TorchActorCheckpoint`: a picklable `PolicySpec` that rebuilds one saved actor and its frozen
+  observation normalizer as a `TorchActorPolicy` in any process.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+import torch
+from torch import nn
+
+from advgame.errors import ConfigError
+from advgame.policy import AgentInfo
+
+__all__ = [
+    "ACTORS_FORMAT",
+    "GaussianActor",
+    "NumpyMLP",
+    "RewardScaler",
+    "RunningNorm",
+    "TeamModel",
+    "TeamSnapshot",
+    "TorchActorCheckpoint",
+    "TorchActorPolicy",
+    "actor_record",
+]
+
+ACTORS_FORMAT = "advgame-torch-actors-v1"
+"""Format tag of an actors file written by `TeamLearner.save`."""
+
+
+class RunningNorm:
+    """Running mean and variance of a stream of batches (Chan et al.'s parallel update).
+
+    `normalize` maps ``x`` to ``clip((x - mean) / sqrt(var + epsilon), ±clip)``, as SB3's
+    `VecNormalize` does, so saved statistics mean the same thing in both.
+    """
+
+    def __init__(self, shape: Sequence[int], clip: float = 10.0, epsilon: float = 1e-8) -> None:
+        self.mean = np.zeros(tuple(shape), dtype=np.float64)
+        self.var = np.ones(tuple(shape), dtype=np.float64)
+        self.count = 1e-4
+        self.clip = float(clip)
+        self.epsilon = float(epsilon)
+
+    def update(self, batch: np.ndarray) -> None:
+        """Fold a batch (leading axis = samples) into the statistics."""
+        n = batch.shape[0]
+        mean = batch.sum(axis=0) / n  # sum/n and the square below: cheaper than mean()/var()
+        centred = batch - mean
+        var = (centred * centred).sum(axis=0) / n
+        delta, total = mean - self.mean, self.count + n
+        self.mean = self.mean + delta * n / total
+        m2 = self.var * self.count + var * n + delta**2 * self.count * n / total
+        self.var, self.count = m2 / total, total
+
+    @property
+    def std(self) -> np.ndarray:
+        """``sqrt(var + epsilon)``: what observations are divided by."""
+        return np.sqrt(self.var + self.epsilon)
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        """Standardize and clip `x` (float32)."""
+        return np.clip((x - self.mean) / self.std, -self.clip, self.clip).astype(np.float32)
+
+    def subset(self, index: slice) -> RunningNorm:
+        """A copy holding the statistics of the components `index` selects."""
+        part = RunningNorm(self.mean[index].shape, self.clip, self.epsilon)
+        part.mean, part.var, part.count = (
+            self.mean[index].copy(),
+            self.var[index].copy(),
+            self.count,
+        )
+        return part
+
+    def state_dict(self) -> dict[str, Any]:
+        """The statistics as tensors (for ``torch.save(..., weights_only=True)`` files)."""
+        return {
+            "mean": torch.from_numpy(self.mean.copy()),
+            "var": torch.from_numpy(self.var.copy()),
+            "count": float(self.count),
+            "clip": self.clip,
+            "epsilon": self.epsilon,
+        }
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Restore statistics written by `state_dict`."""
+        self.mean = state["mean"].numpy().astype(np.float64)
+        self.var = state["var"].numpy().astype(np.float64)
+        self.count = float(state["count"])
+        self.clip, self.epsilon = float(state["clip"]), float(state["epsilon"])
+
+
+class RewardScaler:
+    """Scale each agent's reward by the running std of its discounted return (not its mean)."""
+
+    def __init__(self, n_envs: int, n_agents: int, gamma: float, clip: float = 10.0) -> None:
+        self.returns = np.zeros((n_envs, n_agents))
+        self.rms = RunningNorm((n_agents,), clip=clip)
+        self.gamma = gamma
+
+    def __call__(self, rewards: np.ndarray, dones: np.ndarray, update: bool) -> np.ndarray:
+        """Scaled `rewards` ``[envs, agents]``; `dones` ``[envs]`` ends the tracked returns."""
+        self.returns = self.returns * self.gamma + rewards
+        if update:
+            self.rms.update(self.returns)
+        scaled = np.clip(rewards / self.rms.std, -self.rms.clip, self.rms.clip)
+        self.returns[dones] = 0.0
+        return scaled.astype(np.float32)
+
+
+def _mlp(sizes: Sequence[int], gain_out: float, generator: torch.Generator) -> nn.Sequential:
+    """Tanh MLP, orthogonal weights (gain √2 hidden, `gain_out` last), zero biases (as SB3)."""
+    layers: list[nn.Module] = []
+    for i in range(len(sizes) - 1):
+        linear = nn.Linear(sizes[i], sizes[i + 1])
+        last = i == len(sizes) - 2
+        nn.init.orthogonal_(linear.weight, gain_out if last else math.sqrt(2), generator=generator)
+        nn.init.zeros_(linear.bias)
+        layers += [linear] if last else [linear, nn.Tanh()]
+    return nn.Sequential(*layers)
+
+
+class GaussianActor(nn.Module):
+    """A diagonal Gaussian policy: an MLP mean of the observation, a state-independent log-std."""
+
+    def __init__(
+        self,
+        obs_dim: int,
+        act_dim: int,
+        hidden: Sequence[int],
+        log_std_init: float = 0.0,
+        generator: torch.Generator | None = None,
+    ) -> None:
+        super().__init__()
+        gen = generator if generator is not None else torch.Generator()
+        self.arch = {"obs_dim": obs_dim, "act_dim": act_dim, "hidden": list(hidden)}
+        self.mean = _mlp([obs_dim, *hidden, act_dim], 0.01, gen)
+        self.log_std = nn.Parameter(torch.full((act_dim,), float(log_std_init)))
+
+    def log_prob(
+        self, obs: torch.Tensor, actions: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Log-probabilities of `actions` at `obs` (summed over dims) and the entropy."""
+        return _log_prob(self.mean(obs), self.log_std, actions), self.entropy()
+
+    def entropy(self) -> torch.Tensor:
+        """The Gaussian's entropy (summed over dims; the same at every observation)."""
+        return (self.log_std + _HALF_LOG_2PI_E).sum()
+
+
+_HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)
+_HALF_LOG_2PI_E = 0.5 + _HALF_LOG_2PI
+
+
+def _log_prob(mu: torch.Tensor, log_std: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """Diagonal Gaussian log-density, summed over the last axis (no `Distribution` overhead)."""
+    z = (x - mu) * torch.exp(-log_std)
+    return (-0.5 * z * z - log_std - _HALF_LOG_2PI).sum(-1)
+
+
+class NumpyMLP:
+    """A frozen numpy copy of a Linear/Tanh `nn.Sequential`, for acting a few samples at a time.
+
+    For one to a few views per step, torch's per-call overhead is several times the arithmetic
+    of a 64-unit MLP; collection, `TeamLearner.predict` and `TorchActorPolicy` run this copy.
+    """
+
+    def __init__(self, net: nn.Module) -> None:
+        self.layers: list[tuple[np.ndarray, np.ndarray] | None] = []
+        for module in net.children():
+            if isinstance(module, nn.Linear):
+                weight = module.weight.detach().numpy().T.copy()
+                self.layers.append((weight, module.bias.detach().numpy().copy()))
+            elif isinstance(module, nn.Tanh):
+                self.layers.append(None)
+            else:
+                raise TypeError(f"NumpyMLP copies Linear and Tanh layers only, not {module}.")
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """The network's output for a float32 batch ``[batch, in]``."""
+        for layer in self.layers:
+            x = np.tanh(x) if layer is None else x @ layer[0] + layer[1]
+        return x
+
+
+class TeamSnapshot:
+    """The team's current networks as numpy functions: what a rollout is collected with."""
+
+    def __init__(self, model: TeamModel) -> None:
+        self.agents = list(model.agents)
+        self.means = {a: NumpyMLP(model.actor(a).mean) for a in self.agents}
+        self.log_std = {a: model.actor(a).log_std.detach().numpy().copy() for a in self.agents}
+        self.critics = {k: NumpyMLP(c) for k, c in model.critics.items()}
+        self.centralised = model.centralised
+
+    def sample(
+        self, obs: Mapping[str, np.ndarray], noise: Mapping[str, np.ndarray]
+    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """Actions ``mean + std * noise`` per agent and their log-probabilities ``[batch, agents]``."""
+        actions, logp = {}, []
+        for a in self.agents:
+            actions[a] = self.means[a](obs[a]) + np.exp(self.log_std[a]) * noise[a]
+            logp.append((-0.5 * noise[a] ** 2 - self.log_std[a] - _HALF_LOG_2PI).sum(-1))
+        return actions, np.stack(logp, -1).astype(np.float32)
+
+    def values(self, obs: Mapping[str, np.ndarray], state: np.ndarray | None) -> np.ndarray:
+        """Each agent's value estimate, ``[batch, agents]`` (as `TeamModel.values`)."""
+        if self.centralised:
+            assert state is not None, "MAPPO's critic needs the global state"
+            return self.critics["central"](state)
+        return np.concatenate([self.critics[a](obs[a]) for a in self.agents], axis=-1)
+
+
+class TeamModel(nn.Module):
+    """Every protagonist's actor and the team's critic(s), trained by one Adam optimizer.
+
+    Args:
+        obs_dims: observation size per protagonist (in team order).
+        act_dims: action size per protagonist.
+        state_dim: the global state size for MAPPO's centralised critic; None for IPPO.
+        hidden: hidden layer sizes of every network.
+        log_std_init: initial log-std of every actor.
+        generator: the torch generator the weights are drawn from.
+
+    """
+
+    def __init__(
+        self,
+        obs_dims: Mapping[str, int],
+        act_dims: Mapping[str, int],
+        state_dim: int | None,
+        hidden: Sequence[int],
+        log_std_init: float,
+        generator: torch.Generator,
+    ) -> None:
+        super().__init__()
+        self.agents = list(obs_dims)
+        self.actors = nn.ModuleDict(
+            {
+                a: GaussianActor(obs_dims[a], act_dims[a], hidden, log_std_init, generator)
+                for a in self.agents
+            }
+        )
+        self.centralised = state_dim is not None
+        if state_dim is not None:
+            self.critics = nn.ModuleDict(
+                {"central": _mlp([state_dim, *hidden, len(self.agents)], 1.0, generator)}
+            )
+        else:
+            self.critics = nn.ModuleDict(
+                {a: _mlp([obs_dims[a], *hidden, 1], 1.0, generator) for a in self.agents}
+            )
+
+    def values(self, obs: Mapping[str, torch.Tensor], state: torch.Tensor | None) -> torch.Tensor:
+        """Each protagonist's value estimate, ``[batch, agents]``."""
+        if self.centralised:
+            assert state is not None, "MAPPO's critic needs the global state"
+            return self.critics["central"](state)
+        return torch.cat([self.critics[a](obs[a]) for a in self.agents], dim=-1)
+
+    def actor(self, agent: str) -> GaussianActor:
+        """`agent`'s actor."""
+        return cast(GaussianActor, self.actors[agent])
+
+    def snapshot(self) -> TeamSnapshot:
+        """Numpy copies of the current networks (for collecting a rollout)."""
+        return TeamSnapshot(self)
+
+    def clip_grad_norms(self, max_norm: float) -> None:
+        """Clip the gradient norm of each actor and each critic separately."""
+        for module in [*self.actors.values(), *self.critics.values()]:
+            nn.utils.clip_grad_norm_(module.parameters(), max_norm)
+
+
+def actor_record(
+    actor: GaussianActor, norm: RunningNorm | None, low: np.ndarray, high: np.ndarray
+) -> dict[str, Any]:
+    """What an actors file holds for one protagonist (tensors and plain values only)."""
+    return {
+        "arch": dict(actor.arch),
+        "state_dict": {k: v.detach().clone() for k, v in actor.state_dict().items()},
+        "normalizer": None if norm is None else norm.state_dict(),
+        "low": torch.from_numpy(np.asarray(low, dtype=np.float32).copy()),
+        "high": torch.from_numpy(np.asarray(high, dtype=np.float32).copy()),
+    }
+
+
+class TorchActorPolicy:
+    """A saved actor behind its frozen observation normalizer, as an advgame `Policy`.
+
+    Acts with the Gaussian's mean (`deterministic`) or samples it with its own generator
+    (reseeded by `reset(seed)`); actions are clipped into the action space, as in training.
+    """
+
+    def __init__(self, record: Mapping[str, Any], deterministic: bool = True) -> None:
+        arch = record["arch"]
+        actor = GaussianActor(arch["obs_dim"], arch["act_dim"], arch["hidden"])
+        actor.load_state_dict(record["state_dict"])
+        self.mean = NumpyMLP(actor.mean)
+        self.std = actor.log_std.detach().exp().numpy()
+        self.norm: RunningNorm | None = None
+        if record["normalizer"] is not None:
+            self.norm = RunningNorm((arch["obs_dim"],))
+            self.norm.load_state_dict(record["normalizer"])
+        self.low, self.high = record["low"].numpy(), record["high"].numpy()
+        self.deterministic = deterministic
+        self._rng = np.random.default_rng(0)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reseed the action sampling (a stochastic policy's only randomness)."""
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+
+    def act(self, observation: Any) -> np.ndarray:
+        """The action for one raw observation."""
+        obs = np.asarray(observation, dtype=np.float64)[None]
+        x = self.norm.normalize(obs) if self.norm is not None else obs.astype(np.float32)
+        action = self.mean(x)[0]
+        if not self.deterministic:
+            action = action + self.std * self._rng.standard_normal(action.shape)
+        return np.clip(action, self.low, self.high).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=32)
+def _load_actors(path: str, mtime_ns: int) -> dict[str, Any]:
+    """An actors file, cached per process (keyed on its modification time too)."""
+    data = torch.load(path, map_location="cpu", weights_only=True)
+    if not isinstance(data, dict) or data.get("format") != ACTORS_FORMAT:
+        raise ConfigError(f"{path} is not an advgame actors file ({ACTORS_FORMAT}).")
+    return data
+
+
+@dataclass(frozen=True)
+class TorchActorCheckpoint:
+    """One protagonist's actor saved by `TeamLearner.save`, as a picklable policy spec.
+
+    Example:
+        ``TorchActorCheckpoint("runs/ma/checkpoints/iter_0003/mappo_actors.pt", "agent_0")``
+
+    """
+
+    path: str
+    """The actors file (``<algo>_actors.pt``), which holds every protagonist's actor."""
+    agent: str
+    """Whose actor to build (the protagonist it was trained as)."""
+    deterministic: bool = True
+    """Act with the Gaussian's mean instead of sampling."""
+
+    def build(self, info: AgentInfo) -> TorchActorPolicy:
+        """Load the actor (cached per process) and check it fits `info`'s spaces."""
+        if not Path(self.path).exists():
+            raise ConfigError(f"No actors file at {self.path!r}.")
+        actors = _load_actors(str(self.path), os.stat(self.path).st_mtime_ns)["actors"]
+        if self.agent not in actors:
+            raise ConfigError(
+                f"{self.path} has no actor for {self.agent!r}; it holds {sorted(actors)}."
+            )
+        record = actors[self.agent]
+        want = (tuple(info.observation_space.shape or ()), info.action_shape)
+        have = ((record["arch"]["obs_dim"],), (record["arch"]["act_dim"],))
+        if want != have:
+            raise ConfigError(
+                f"The actor of {self.agent!r} in {self.path} maps observations {have[0]} to "
+                f"actions {have[1]}, but {info.agent!r} observes {want[0]} and acts {want[1]}."
+            )
+        return TorchActorPolicy(record, self.deterministic)

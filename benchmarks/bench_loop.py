@@ -1,0 +1,119 @@
+"""Speed of the ATLA alternation loop against plain SB3 PPO, measured side by side in one run.
+
+Two ways of spending the same number of environment steps on Hopper-v5 with the same PPO
+hyper-parameters (`advgame.agents.PPOConfig`: 2048 steps per rollout, 10 epochs, batch 64,
+[64, 64]) and observation/reward normalization:
+
+* ``plain``: SB3 PPO on ``gymnasium.make("Hopper-v5")`` in a `DummyVecEnv` + `VecNormalize`,
+  ``model.learn(K)``.
+* ``loop``: ``advgame.training.train`` with method ``atla`` (a PPO protagonist and a PPO
+  observation adversary, alternating), ``protagonist_steps = adversary_steps = 2048`` and
+  ``K / 4096`` iterations, so protagonist + adversary steps add up to ``K``. The per-iteration
+  quick evaluation is off (``eval_episodes=0``); checkpointing, population and logs are on.
+
+Each is timed end to end (model/side construction included) in ``--rounds`` interleaved
+rounds (plain, loop, plain, loop, ...) so machine noise hits both alike; the best round of
+each is reported in environment steps per second of wall-clock time, with the ratio
+loop / plain (goal >= 0.85). Steps per second of this process's CPU time are printed too: on
+a shared machine they are the steadier measure (both run on one thread, so CPU time is the
+work done). The loop's own fps column (training phases only, from ``progress.csv``) is printed
+as well. Torch runs on one thread in both.
+
+Run: ``python benchmarks/bench_loop.py --steps 16384 --rounds 2``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import tempfile
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import torch
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+from advgame.agents import PPOConfig
+from advgame.training import METHODS, TrainConfig, train
+
+ENV = "Hopper-v5"
+ROLLOUT = PPOConfig().n_steps
+
+
+class Timer:
+    """Wall-clock and CPU seconds of a block."""
+
+    def __enter__(self) -> Timer:
+        self.wall, self.cpu = time.perf_counter(), time.process_time()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.wall = time.perf_counter() - self.wall
+        self.cpu = time.process_time() - self.cpu
+
+
+def bench_plain(steps: int, seed: int) -> tuple[float, float]:
+    with Timer() as t:
+        learner = PPOConfig()
+        venv = VecNormalize(DummyVecEnv([lambda: gym.make(ENV)]), gamma=learner.gamma)
+        model = learner.make_model(venv, seed, steps)
+        model.learn(steps, progress_bar=False)
+    venv.close()
+    return model.num_timesteps / t.wall, model.num_timesteps / t.cpu
+
+
+def bench_loop(steps: int, seed: int, out: Path) -> tuple[float, float, float]:
+    iterations = max(steps // (2 * ROLLOUT), 1)
+    cfg = TrainConfig(
+        scenario=ENV,
+        **METHODS["atla"],
+        iterations=iterations,
+        protagonist_steps=ROLLOUT,
+        adversary_steps=ROLLOUT,
+        eval_episodes=0,
+        seed=seed,
+    )
+    with Timer() as t:
+        run = train(cfg, out, progress=False)
+    with (run / "progress.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    done = int(rows[-1]["protagonist_steps"]) + int(rows[-1]["adversary_steps"])
+    phases = sum(float(r["wall_s"]) for r in rows)
+    return done / t.wall, done / t.cpu, done / phases
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--steps", type=int, default=16384, help="environment steps per side")
+    parser.add_argument("--rounds", type=int, default=2, help="interleaved rounds")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    plain: list[tuple[float, float]] = []
+    loop: list[tuple[float, float]] = []
+    phases: list[float] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(args.rounds):
+            plain.append(bench_plain(args.steps, args.seed))
+            wall, cpu, in_phases = bench_loop(args.steps, args.seed, Path(tmp) / f"run{r}")
+            loop.append((wall, cpu))
+            phases.append(in_phases)
+            print(
+                f"round {r}: plain {plain[-1][0]:.0f} steps/s (cpu {plain[-1][1]:.0f}), "
+                f"loop {loop[-1][0]:.0f} steps/s (cpu {loop[-1][1]:.0f})"
+            )
+    wall_p, cpu_p = max(w for w, _ in plain), max(c for _, c in plain)
+    wall_l, cpu_l = max(w for w, _ in loop), max(c for _, c in loop)
+    print(f"{ENV}, {args.steps} environment steps each, best of {args.rounds} rounds:")
+    print("                                wall steps/s   CPU steps/s")
+    print(f"  plain SB3 PPO + VecNormalize : {wall_p:10.0f} {cpu_p:13.0f}")
+    print(f"  advgame loop (atla)          : {wall_l:10.0f} {cpu_l:13.0f}")
+    print(
+        f"  ratio loop / plain           : {wall_l / wall_p:10.2f} {cpu_l / cpu_p:13.2f}  (goal >= 0.85)"
+    )
+    print(f"  loop training phases only    : {max(phases):10.0f}  (progress.csv wall_s)")
+
+
+if __name__ == "__main__":
+    main()
