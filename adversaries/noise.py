@@ -44,22 +44,23 @@ class _NoisePolicy:
         self.info = info
         self.draw = draw
         self.rng = np.random.default_rng()
-        self._block = np.empty((0, *info.action_shape), dtype=np.float32)
+        self._rows: list[np.ndarray] = []  # the block's rows, split once per block
         self._i = 0
 
     def reset(self, seed: int | None = None) -> None:
         """Reseed (when a seed is given), dropping samples drawn from the old seed."""
         if seed is not None:
             self.rng = np.random.default_rng(seed)
-            self._i = len(self._block)
+            self._i = len(self._rows)
 
     def act(self, observation: Any) -> np.ndarray:
         """The next encoded noise sample."""
-        if self._i >= len(self._block):
-            self._block = self.info.encode(self.draw(self.rng, self.BLOCK))
-            self._i = 0
-        self._i += 1
-        return self._block[self._i - 1]
+        i = self._i
+        if i >= len(self._rows):
+            self._rows = list(self.info.encode(self.draw(self.rng, self.BLOCK)))
+            i = 0
+        self._i = i + 1
+        return self._rows[i]
 
 
 def _vector(value: float | Sequence[float], size: int, name: str) -> np.ndarray:

@@ -39,8 +39,8 @@ _LAZY = {
     "PolicySpec": "advgame.policy",
     "SingleAgentView": "advgame.views",
     "view_factory": "advgame.views",
-    "rollout": "advgame.rollout",
-    "EpisodeResult": "advgame.rollout",
+    "rollout": "advgame.episodes",
+    "EpisodeResult": "advgame.episodes",
     "AdvgameError": "advgame.errors",
 }
 
@@ -55,11 +55,11 @@ if TYPE_CHECKING:
         Param,
         RewardDisruptor,
     )
+    from advgame.episodes import EpisodeResult, rollout
     from advgame.errors import AdvgameError
     from advgame.game import Game
     from advgame.policy import AgentInfo, Policy, PolicySpec
     from advgame.registry import Preset, ScenarioSpec, list_scenarios, make, register, scenario_spec
-    from advgame.rollout import EpisodeResult, rollout
     from advgame.schedule import Schedule
     from advgame.views import SingleAgentView, view_factory
 

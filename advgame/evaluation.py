@@ -65,7 +65,7 @@ log = logging.getLogger(__name__)
 SEED_STRIDE = 10_000
 """Episode ``i`` of evaluation seed ``s`` plays `rollout` seed ``s * SEED_STRIDE + i``, so the
 episodes of seeds 0, 1, 2, ... never share a reset seed (as ``s + i`` would)."""
-_PRELOAD = ("advgame.evaluation", "advgame.rollout", "advgame.scenarios.mujoco", "mujoco")
+_PRELOAD = ("advgame.evaluation", "advgame.episodes", "advgame.scenarios.mujoco", "mujoco")
 
 
 def _check_spec(spec: Any, what: str) -> None:
@@ -165,7 +165,7 @@ def run_job(job: EvalJob) -> list[dict[str, Any]]:
     other seeds; torch, if imported, runs on one thread meanwhile.
     """
     import advgame
-    from advgame.rollout import build_policies, rollout
+    from advgame.episodes import build_policies, rollout
 
     game = advgame.make(job.scenario, **job.make_kwargs)
     prot = job.protagonist_spec

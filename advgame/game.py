@@ -21,19 +21,18 @@ true next state; the protagonists act on the perturbed one the sense move return
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from advgame.disruptors.base import Disruptor, DisruptorSpec
+from advgame.disruptors.base import Disruptor, DisruptorSpec, all_finite
 from advgame.errors import ActionError, ConfigError, did_you_mean
 from advgame.policy import AgentInfo
-from advgame.schedule import PHASES
+from advgame.schedule import PHASES, Schedule
 from advgame.task import TaskBase
 
 __all__ = ["Game", "Move"]
@@ -125,6 +124,10 @@ class Game(ParallelEnv):
             **task.action_spaces,
             **{a: d.action_space for a, d in self.disruptors.items()},
         }
+        self._p_spaces = {  # shape None: a Discrete action
+            p: (s, None if isinstance(s, spaces.Discrete) else s.shape)
+            for p, s in task.action_spaces.items()
+        }
         by_hook: dict[str, list[Disruptor]] = {
             "observation": [],
             "action": [],
@@ -144,6 +147,10 @@ class Game(ParallelEnv):
         self._data_ds = [d for d in by_hook["environment"] if not getattr(d, "edits_model", False)]
         self._env_ds = self._model_ds + self._data_ds
         self._act_ds = [*self._env_ds, *self._action_ds, *self._reward_ds, *self._stale]
+        self._held_sensing = [d for d in self._sensing if d.schedule.hold]
+        self._constant: dict[str, bool] = {}
+        self._dynamic: list[tuple[str, Schedule]] = []
+        self._fixed_movers = (frozenset[str](), frozenset[str]())
         self._phase = ""
         self.phase = phase
         self._rng = np.random.default_rng()
@@ -152,6 +159,7 @@ class Game(ParallelEnv):
         self.move = ACT
         self.t = 0
         self.next_movers: frozenset[str] = frozenset()
+        self._act_next: frozenset[str] = frozenset()
         self._true_obs: dict[str, Any] = {}
         self._shown: dict[str, Any] = {}
         self._state: Any = None
@@ -206,6 +214,22 @@ class Game(ParallelEnv):
         if value not in PHASES[:2]:
             raise ConfigError(f"phase must be 'train' or 'eval', got {value!r}.")
         self._phase = value
+        self._plan_schedules()
+
+    def _plan_schedules(self) -> None:
+        """Split the schedules into those constant in this phase and those drawn step by step.
+
+        When all are constant, each step's movers are too: `_begin_step` then reuses them.
+        """
+        self._constant, self._dynamic = {}, []
+        for a, d in self.disruptors.items():
+            value = d.schedule.constant(self._phase)
+            if value is None:
+                self._dynamic.append((a, d.schedule))
+            else:
+                self._constant[a] = value
+        if not self._dynamic:
+            self._fixed_movers = self._movers(self._constant)
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         """Start an episode: restore nominal parameters, reset the task, draw the first schedule.
@@ -236,7 +260,7 @@ class Game(ParallelEnv):
             raise ActionError("The episode is over (no live agents); call reset() before step().")
         if actions.keys() != self._all:
             self._bad_keys(actions)
-        return self._package(self.play(actions))
+        return self._package(self._sense(actions) if self.move == SENSE else self._act(actions))
 
     def play(self, actions: Mapping[str, Any]) -> Move:
         """Make one move, lean form: `actions` needs only the agents in `next_movers`.
@@ -246,7 +270,7 @@ class Game(ParallelEnv):
         """
         if not self.agents:
             raise ActionError("The episode is over (no live agents); call reset() before play().")
-        if not self.next_movers.issubset(actions):
+        if not actions.keys() >= self.next_movers:
             missing = sorted(self.next_movers - set(actions))
             raise ActionError(
                 f"This {self.move} move needs actions for {missing} (game.next_movers)."
@@ -270,39 +294,43 @@ class Game(ParallelEnv):
     # -- moves ------------------------------------------------------------------------------
     def _sense(self, actions: Mapping[str, Any]) -> Move:
         shown = dict(self._shown)
-        clipped = {}
+        clipped: dict[str, int] = {}
+        active = self._active
         for d in self._sensing:
-            if self._active[d.agent]:
+            if active[d.agent]:
                 u, clipped[d.agent] = d.decode(actions[d.agent])
                 self._last[d.agent] = u
                 d.observation(shown, u)
         self._shown = shown
         self.move = ACT
-        self.next_movers = self._act_movers()
+        self.next_movers = self._act_next
         return Move(SENSE, clipped)
 
     def _act(self, actions: Mapping[str, Any]) -> Move:
         used: dict[str, np.ndarray] = {}
         clipped: dict[str, int] = {}
+        active = self._active
         for d in self._act_ds:
-            if self._active[d.agent]:
-                used[d.agent], clipped[d.agent] = d.decode(actions[d.agent])
-                self._last[d.agent] = used[d.agent]
+            if active[d.agent]:
+                u, clipped[d.agent] = d.decode(actions[d.agent])
+                used[d.agent] = self._last[d.agent] = u
         if self._env_ds:
             self._disrupt_environment(used)
-        acts = {p: self._protagonist_action(p, actions[p]) for p in self.protagonists}
+        acts: dict[str, Any] = {}
+        for p in self.protagonists:
+            acts[p] = self._protagonist_action(p, actions[p])
         for d in self._action_ds:
-            u = self._effective(d, used)
-            if u is not None:
-                d.action(acts, u, self._rng)
+            v = self._effective(d, used)
+            if v is not None:
+                d.action(acts, v, self._rng)
         obs, reward, cost, terminated, truncated, info = self.task.step(acts)
         payoff = reward - self.cost_weight * cost
         rewards = dict.fromkeys(self.protagonists, reward)
         costs = dict.fromkeys(self.protagonists, cost)
         for d in self._reward_ds:
-            u = self._effective(d, used)
-            if u is not None:
-                d.reward(rewards, costs, u)
+            v = self._effective(d, used)
+            if v is not None:
+                d.reward(rewards, costs, v)
         self.t += 1
         if terminated or truncated:
             self._true_obs = self._shown = obs
@@ -310,20 +338,19 @@ class Game(ParallelEnv):
             self.agents = []
             self.next_movers = frozenset()
         else:
-            self._begin_step(obs, pending=used)
+            self._begin_step(obs, used)
         return Move(ACT, clipped, rewards, costs, reward, cost, payoff, terminated, truncated, info)
 
     def _package(self, m: Move) -> tuple[dict, dict, dict, dict, dict]:
-        obs = {**self._shown, **dict.fromkeys(self.adversaries, self._state)}
-        clipped = m.clipped
         infos: dict[str, dict] = {}
         if m.kind == SENSE:
-            rewards = dict.fromkeys(self.possible_agents, 0.0)
+            rewards = dict.fromkeys(self.protagonists, 0.0)
+            adversary_reward = 0.0
             for p in self.protagonists:
                 infos[p] = {"acted": False}
         else:
             assert m.rewards is not None and m.costs is not None and m.info is not None
-            rewards = {**m.rewards, **dict.fromkeys(self.adversaries, -m.payoff)}
+            rewards, adversary_reward = dict(m.rewards), -m.payoff
             for p in self.protagonists:
                 infos[p] = {
                     **m.info,
@@ -333,10 +360,14 @@ class Game(ParallelEnv):
                     "cost": m.costs[p],
                     "payoff": m.payoff,
                 }
-        for a in self.adversaries:
+        obs, state, clipped = dict(self._shown), self._state, m.clipped
+        for a in self.adversaries:  # plain loops: cheaper than merging dicts
+            obs[a] = state
+            rewards[a] = adversary_reward
             infos[a] = {"acted": a in clipped, "clipped": clipped.get(a, 0)}
-        terms = dict.fromkeys(self.possible_agents, m.terminated)
-        truncs = dict.fromkeys(self.possible_agents, m.truncated)
+        terms, truncs = {}, {}
+        for a in self.possible_agents:
+            terms[a], truncs[a] = m.terminated, m.truncated
         return obs, rewards, terms, truncs, infos
 
     def _disrupt_environment(self, used: dict[str, np.ndarray]) -> None:
@@ -357,8 +388,16 @@ class Game(ParallelEnv):
         """Record the true state of step t, draw its schedule, and build what agents see."""
         self._true_obs = obs
         self._state = self.task.state(obs)
-        t, phase, rng = self.t, self._phase, self._rng
-        self._active = {a: d.schedule.is_active(t, phase, rng) for a, d in self.disruptors.items()}
+        if self._dynamic:
+            active = {**self._constant}
+            t, phase, rng = self.t, self._phase, self._rng
+            for a, schedule in self._dynamic:
+                active[a] = schedule.is_active(t, phase, rng)
+            sense_movers, self._act_next = self._movers(active)
+        else:
+            active = self._constant
+            sense_movers, self._act_next = self._fixed_movers
+        self._active = active
         shown = dict(obs)
         for d in self._stale:  # δ chosen in the act move that produced this observation
             u = (pending or {}).get(d.agent)
@@ -366,23 +405,20 @@ class Game(ParallelEnv):
                 u = self._last.get(d.agent)
             if u is not None:
                 d.observation(shown, u)
-        sense = False
-        for d in self._sensing:
-            if self._active[d.agent]:
-                sense = True
-            elif d.schedule.hold and d.agent in self._last:
+        for d in self._held_sensing:
+            if not active[d.agent] and d.agent in self._last:
                 d.observation(shown, self._last[d.agent])
         self._shown = shown
-        self.move = SENSE if sense else ACT
-        if sense:
-            self.next_movers = frozenset(d.agent for d in self._sensing if self._active[d.agent])
+        if sense_movers:
+            self.move, self.next_movers = SENSE, sense_movers
         else:
-            self.next_movers = self._act_movers()
+            self.move, self.next_movers = ACT, self._act_next
 
-    def _act_movers(self) -> frozenset[str]:
-        return frozenset(
-            [*self.protagonists, *(d.agent for d in self._act_ds if self._active[d.agent])]
-        )
+    def _movers(self, active: Mapping[str, bool]) -> tuple[frozenset[str], frozenset[str]]:
+        """Who moves in a step with these active disruptors: (sense move, act move)."""
+        sense = frozenset(d.agent for d in self._sensing if active[d.agent])
+        act = frozenset([*self.protagonists, *(d.agent for d in self._act_ds if active[d.agent])])
+        return sense, act
 
     def _effective(self, d: Disruptor, used: dict[str, np.ndarray]) -> np.ndarray | None:
         u = used.get(d.agent)
@@ -391,19 +427,10 @@ class Game(ParallelEnv):
         return u
 
     def _protagonist_action(self, agent: str, action: Any) -> Any:
-        space = self._act_spaces[agent]
-        if isinstance(space, spaces.Discrete):
-            try:
-                ok = np.ndim(action) == 0 and float(action) == int(action)
-                ok = ok and space.contains(np.int64(action))
-            except (TypeError, ValueError, OverflowError):  # None, "left", nan, inf
-                ok = False
-            if not ok:
-                raise ActionError(
-                    f"Action for {agent!r} must be an int in {space}, got {action!r}."
-                )
-            return np.int64(action)
-        a = np.asarray(action)
+        space, shape = self._p_spaces[agent]
+        if shape is None:
+            return self._discrete_action(agent, cast(spaces.Discrete, space), action)
+        a = action if type(action) is np.ndarray else np.asarray(action)
         if a.dtype != space.dtype:
             try:
                 a = a.astype(space.dtype)
@@ -411,14 +438,24 @@ class Game(ParallelEnv):
                 raise ActionError(
                     f"Action for {agent!r} is not numeric: {action!r} ({space})."
                 ) from None
-        if a.shape != space.shape:
+        if a.shape != shape:
             raise ActionError(
-                f"Action for {agent!r} has shape {a.shape}; expected {space.shape} ({space})."
+                f"Action for {agent!r} has shape {a.shape}; expected {shape} ({space})."
             )
-        flat = a.reshape(-1)
-        if not math.isfinite(flat.dot(flat)) and not np.isfinite(a).all():  # dot: one cheap pass
+        if not all_finite(a):
             raise ActionError(f"Action for {agent!r} contains NaN or inf: {a}.")
         return a
+
+    @staticmethod
+    def _discrete_action(agent: str, space: spaces.Discrete, action: Any) -> np.int64:
+        try:
+            ok = np.ndim(action) == 0 and float(action) == int(action)
+            ok = ok and space.contains(np.int64(action))
+        except (TypeError, ValueError, OverflowError):  # None, "left", nan, inf
+            ok = False
+        if not ok:
+            raise ActionError(f"Action for {agent!r} must be an int in {space}, got {action!r}.")
+        return np.int64(action)
 
     def _restore_environment(self) -> None:
         if not self._env_ds:

@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
+from advgame.episodes import filler_action, rollout
 from advgame.learning import EpisodeStats, Side
 from advgame.policy import ConstantPolicy
 from advgame.population import Member, Population
 from advgame.registry import load, make
-from advgame.rollout import filler_action, rollout
 from advgame.training import (
     _ZERO,
     PROTAGONISTS,

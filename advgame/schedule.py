@@ -103,6 +103,25 @@ class Schedule:
             return True
         return self.stop is not None and t >= self.stop
 
+    def constant(self, phase: str) -> bool | None:
+        """`is_active` of every step in `phase` when it is the same for all and draws nothing.
+
+        ``False`` outside the schedule's phase, ``True`` for an every-step schedule, else
+        ``None`` (activity depends on the step or on a random draw). The game uses it to skip
+        evaluating constant schedules step by step.
+
+        Example:
+            >>> Schedule().constant("train"), Schedule.every_n(2).constant("train")
+            (True, None)
+
+        """
+        if not self.in_phase(phase):
+            return False
+        always = self.every == 1 and self.start == 0 and self.stop is None
+        if always and not self.once_per_episode and self.probability >= 1.0:
+            return True
+        return None
+
     def is_active(self, t: int, phase: str, rng: np.random.Generator | None) -> bool:
         """Whether step `t` is attacked; draws from `rng` only when `probability` < 1."""
         if not self.in_phase(phase) or t < self.start:

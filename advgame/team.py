@@ -23,9 +23,9 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from advgame.episodes import build_policies
 from advgame.errors import ActionError, ConfigError
 from advgame.game import Game, Move
-from advgame.rollout import build_policies
 
 __all__ = ["TeamView", "team_factory"]
 

@@ -16,9 +16,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from advgame.episodes import build_policies
 from advgame.errors import ConfigError
-from advgame.game import Game
-from advgame.rollout import build_policies
+from advgame.game import Game, Move
 
 __all__ = ["SingleAgentView", "view_factory"]
 
@@ -92,8 +92,11 @@ class SingleAgentView(gym.Env):
         """One decision of the learner, then the moves until its next one (or the episode end)."""
         actions = self._others()
         actions[self.agent] = action
-        tally = _Tally()
-        self._play(actions, tally)
+        if self._protagonist:
+            tally = self._protagonist_move(self.game.play(actions))
+        else:
+            tally = _Tally()
+            self._play(actions, tally)
         while self.game.agents and self.agent not in self.game.next_movers:
             self._play(self._others(), tally)
         if tally.truncated and self._schedule is not None and self._schedule.exhausted(self.game.t):
@@ -107,6 +110,23 @@ class SingleAgentView(gym.Env):
             tally.truncated,
             tally.info,
         )
+
+    def _protagonist_move(self, move: Move) -> _Tally:
+        """`_play`'s tally of a protagonist's own move into a fresh tally, with fewer steps.
+
+        A protagonist's decision is always an act move, and every later move before its next
+        decision is a sense move, which adds nothing to its tally.
+        """
+        assert move.rewards is not None and move.costs is not None and move.info is not None
+        tally = _Tally()
+        tally.reward += move.rewards[self.agent]
+        info = tally.info = dict(move.info)
+        info["cost"] = info.get("cost", 0.0) + move.costs[self.agent]
+        info["true_reward"] = info.get("true_reward", 0.0) + move.reward
+        info["true_cost"] = info.get("true_cost", 0.0) + move.cost
+        info["payoff"] = info.get("payoff", 0.0) + move.payoff
+        tally.terminated, tally.truncated = move.terminated, move.truncated
+        return tally
 
     def _play(self, actions: dict[str, Any], tally: _Tally) -> None:
         move = self.game.play(actions)
@@ -131,10 +151,11 @@ class SingleAgentView(gym.Env):
         tally.terminated, tally.truncated = move.terminated, move.truncated
 
     def _others(self) -> dict[str, Any]:
-        game = self.game
-        return {
-            a: self.policies[a].act(game.observe(a)) for a in game.next_movers if a != self.agent
-        }
+        game, out = self.game, {}
+        for a in game.next_movers:
+            if a != self.agent:
+                out[a] = self.policies[a].act(game.observe(a))
+        return out
 
     def set_policies(self, policies: Mapping[str, Any]) -> None:
         """Swap some embedded policies (the training loop does this between phases).

@@ -1,6 +1,6 @@
 """A small reproduction of the paper's robustness findings, with intervals over seeds.
 
-Claims checked on Hopper-v5 (PPO, the paper's hyper-parameters except the step budget):
+Claims checked (default Hopper-v5; PPO, the paper's hyper-parameters except the step budget):
 
 1. PPO's return falls as Gaussian state noise rises σ = 0 → 0.1 → 0.15, and more in the
    post-training setting (trained nominally, noise only at test) than in-training (trained and
@@ -32,11 +32,10 @@ from typing import Any
 
 import numpy as np
 
-SCENARIO = "Hopper-v5"
 SIGMAS = (0.0, 0.1, 0.15)
 
 
-def _train_seed(seed: int, steps: int, out: str) -> dict[str, str]:
+def _train_seed(seed: int, steps: int, out: str, scenario: str, attack: str) -> dict[str, str]:
     import torch
 
     from advgame.suite import _train_or_resume
@@ -45,7 +44,7 @@ def _train_seed(seed: int, steps: int, out: str) -> dict[str, str]:
     torch.set_num_threads(1)
     iters = max(steps // 2048, 1)
     common = {
-        "scenario": SCENARIO,
+        "scenario": scenario,
         "seed": seed,
         "iterations": iters,
         "protagonist_steps": 2048,
@@ -56,7 +55,7 @@ def _train_seed(seed: int, steps: int, out: str) -> dict[str, str]:
         "ppo": {**common, **METHODS["ppo"]},
         "ppo-noise-0.1": {**common, "preset": "state-gauss-0.1", "learned": []},
         "ppo-noise-0.15": {**common, "preset": "state-gauss-0.15", "learned": []},
-        "atla": {**common, **METHODS["atla"]},
+        "atla": {**common, **METHODS["atla"], "preset": attack},
     }
     dirs = {}
     for name, fields in runs.items():
@@ -67,12 +66,12 @@ def _train_seed(seed: int, steps: int, out: str) -> dict[str, str]:
 
 
 def _mean_return(
-    scenario_kwargs: dict, protagonist: Any, adversaries: dict, seed: int, episodes: int
+    scenario: str, kwargs: dict, protagonist: Any, adversaries: dict, seed: int, episodes: int
 ) -> float:
     import advgame
-    from advgame.rollout import rollout
+    from advgame.episodes import rollout
 
-    game = advgame.make(SCENARIO, phase="eval", **scenario_kwargs)
+    game = advgame.make(scenario, phase="eval", **kwargs)
     results = rollout(
         game,
         {"protagonist": protagonist, **adversaries},
@@ -83,7 +82,9 @@ def _mean_return(
     return float(np.mean([r.true_return for r in results]))
 
 
-def _evaluate_seed(seed: int, dirs: dict[str, str], br_steps: int, episodes: int, out: str) -> dict:
+def _evaluate_seed(
+    seed: int, dirs: dict[str, str], br_steps: int, episodes: int, out: str, sc: str, attack: str
+) -> dict:
     import torch
 
     from advgame.adversaries import GaussianAdversary, RandomAdversary
@@ -101,34 +102,39 @@ def _evaluate_seed(seed: int, dirs: dict[str, str], br_steps: int, episodes: int
     }
     row: dict[str, float] = {}
     for s in SIGMAS:  # post-training: trained nominally, tested with noise
-        row[f"post σ={s}"] = _mean_return(noise[s][0], prot["ppo"], noise[s][1], seed, episodes)
+        row[f"post σ={s}"] = _mean_return(sc, noise[s][0], prot["ppo"], noise[s][1], seed, episodes)
     row["in σ=0"] = row["post σ=0.0"]
     for s in SIGMAS[1:]:  # in-training: trained and tested with the same noise
         row[f"in σ={s}"] = _mean_return(
-            noise[s][0], prot[f"ppo-noise-{s}"], noise[s][1], seed, episodes
+            sc, noise[s][0], prot[f"ppo-noise-{s}"], noise[s][1], seed, episodes
         )
-    atla = {"preset": "atla"}
+    atla = {"preset": attack}
     for name in ("ppo", "atla"):
-        row[f"{name} nominal"] = _mean_return({"preset": "default"}, prot[name], {}, seed, episodes)
+        row[f"{name} nominal"] = _mean_return(
+            sc, {"preset": "default"}, prot[name], {}, seed, episodes
+        )
         row[f"{name} random ε"] = _mean_return(
-            atla, prot[name], {"observation_adversary": RandomAdversary()}, seed, episodes
+            sc, atla, prot[name], {"observation_adversary": RandomAdversary()}, seed, episodes
         )
         br = best_responses(
-            SCENARIO,
-            "atla",
+            sc,
+            attack,
             prot[name],
             Path(out) / "br" / f"{name}-s{seed}",
             steps=br_steps,
             seed=seed,
         )
-        row[f"{name} learned ε"] = _mean_return(atla, prot[name], br, seed, episodes)
+        row[f"{name} learned ε"] = _mean_return(sc, atla, prot[name], br, seed, episodes)
     return row
 
 
-def _seed_job(seed: int, steps: int, br_steps: int, episodes: int, out: str) -> dict:
+def _seed_job(seed: int, args: argparse.Namespace) -> dict:
     logging.basicConfig(level=logging.WARNING)
-    dirs = _train_seed(seed, steps, out)
-    return _evaluate_seed(seed, dirs, br_steps, episodes, out)
+    out = str(args.out)
+    dirs = _train_seed(seed, args.steps, out, args.scenario, args.attack_preset)
+    return _evaluate_seed(
+        seed, dirs, args.br_steps, args.episodes, out, args.scenario, args.attack_preset
+    )
 
 
 def _interval(values: list[float]) -> tuple[float, float]:
@@ -148,9 +154,10 @@ def _markdown(rows: list[dict], args: argparse.Namespace) -> str:
     cell = {k: _interval([r[k] for r in rows]) for k in keys}
     fmt = lambda k: f"{cell[k][0]:.0f} ± {cell[k][1]:.0f}"  # noqa: E731
     lines = [
-        "# Reproduction: robustness of PPO and ATLA-PPO on Hopper-v5",
+        f"# Reproduction: robustness of PPO and ATLA-PPO on {args.scenario}",
         "",
-        f"Measured with `python benchmarks/reproduce_robustness.py --seeds {args.seeds} --steps "
+        f"Measured with `python benchmarks/reproduce_robustness.py --scenario {args.scenario} "
+        f"--attack-preset {args.attack_preset} --seeds {args.seeds} --steps "
         f"{args.steps} --br-steps {args.br_steps} --episodes {args.episodes}`: {args.seeds} seeds, "
         f"{args.steps} protagonist steps per run (ATLA: as many adversary steps again), "
         f"best responses trained {args.br_steps} steps, {args.episodes} evaluation episodes per "
@@ -166,7 +173,7 @@ def _markdown(rows: list[dict], args: argparse.Namespace) -> str:
     ]
     lines += [
         "",
-        "## 2-3. Learned vs random attack in the same budget (ATLA ε = 0.075, normalized)",
+        f"## 2-3. Learned vs random attack in the same budget (preset `{args.attack_preset}`)",
         "",
         "| protagonist | nominal | random noise in ε | learned adversary in ε |",
         "|---|---|---|---|",
@@ -180,6 +187,8 @@ def _markdown(rows: list[dict], args: argparse.Namespace) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", default="Hopper-v5")
+    parser.add_argument("--attack-preset", default="atla", help="normalized L∞ observation preset")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--steps", type=int, default=40_000, help="protagonist steps per run")
     parser.add_argument("--br-steps", type=int, default=15_000, help="best-response steps")
@@ -191,10 +200,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     ctx = get_context("forkserver")
     with ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:
-        futures = [
-            pool.submit(_seed_job, s, args.steps, args.br_steps, args.episodes, str(out))
-            for s in range(args.seeds)
-        ]
+        futures = [pool.submit(_seed_job, s, args) for s in range(args.seeds)]
         rows = [f.result() for f in futures]
     (out / "results.json").write_text(json.dumps({"args": vars(args), "per_seed": rows}, indent=2))
     (out / "reproduction.md").write_text(_markdown(rows, args))

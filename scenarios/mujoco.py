@@ -9,7 +9,8 @@ Presets of every MuJoCo scenario:
 * the paper's random-mode settings (``state-gauss-0.1``, ``action-gauss-0.15``, ...; see
   `advgame.scenarios.common.gaussian_presets`).
 * ``atla`` (Ant, HalfCheetah, Hopper, Walker2d): an L∞ observation attack in the protagonist's
-  normalized space with ATLA's budgets.
+  normalized space with ATLA's budgets; ``obs-normalized-0.1`` the same attack with ε = 0.1 on
+  every task.
 * ``shift-deterministic``/``shift-uniform``/``shift-sinusoid`` (Ant, Humanoid: gravity and
   wind; Walker2d, Hopper: torso and foot lengths): the appendix's non-stationary settings.
   The paper gives Walker2d lengths as capsule half-lengths (torso 0.2, foot 0.1) and Hopper's
@@ -155,6 +156,10 @@ def presets(env_id: str) -> dict[str, Preset]:
         ),
         **gaussian_presets(),
     }
+    out["obs-normalized-0.1"] = Preset(
+        (ObservationDisruptor(eps=0.1, space="normalized"),),
+        description="ATLA-style L∞ observation attack, ε = 0.1 in normalized units (any task)",
+    )
     if env_id in ATLA_EPS:
         out["atla"] = Preset(
             (ObservationDisruptor(eps=ATLA_EPS[env_id], space="normalized"),),

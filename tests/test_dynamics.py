@@ -26,7 +26,7 @@ import pytest
 import advgame
 from advgame.adversaries import SinusoidAdversary
 from advgame.disruptors import DynamicsDisruptor, ForceDisruptor, Param
-from advgame.rollout import rollout
+from advgame.episodes import rollout
 from advgame.schedule import Schedule
 
 P = "protagonist"

@@ -11,6 +11,7 @@ import pytest
 
 import advgame
 from advgame.adversaries import ConstantAdversary, GaussianAdversary, UniformAdversary
+from advgame.episodes import rollout
 from advgame.errors import ConfigError, UnknownNameError, UnknownScenarioError
 from advgame.evaluation import (
     SEED_STRIDE,
@@ -28,7 +29,6 @@ from advgame.evaluation import (
     worst_case,
 )
 from advgame.report import plot_budget_curve, plot_heatmap, plot_training_curves, write_report
-from advgame.rollout import rollout
 
 ROOT = Path(__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n"

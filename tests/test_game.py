@@ -23,6 +23,7 @@ from advgame.disruptors import (
     Param,
     RewardDisruptor,
 )
+from advgame.episodes import filler_action, rollout
 from advgame.errors import (
     ActionError,
     AdvgameError,
@@ -32,7 +33,6 @@ from advgame.errors import (
     UnknownScenarioError,
 )
 from advgame.policy import AgentInfo
-from advgame.rollout import filler_action, rollout
 from advgame.schedule import Schedule
 
 P = "protagonist"

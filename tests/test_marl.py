@@ -33,10 +33,10 @@ from advgame.agents.sb3 import PPOConfig
 from advgame.checkpoint import SB3Checkpoint, SB3Policy
 from advgame.config import field_docs
 from advgame.disruptors import ObservationDisruptor
+from advgame.episodes import build_policies, filler_action, rollout
 from advgame.errors import ActionError, ConfigError
 from advgame.learning import EpisodeStats, Side
 from advgame.policy import ConstantPolicy
-from advgame.rollout import build_policies, filler_action, rollout
 from advgame.team import TeamView, team_factory
 from advgame.views import view_factory
 

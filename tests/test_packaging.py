@@ -129,3 +129,12 @@ print(json.dumps(out))
     assert Path(out.pop("advgame.agents")).resolve() == ROOT / "agents" / "__init__.py"
     for name, origin in out.items():
         assert origin is None or not Path(origin).resolve().is_relative_to(ROOT), (name, origin)
+
+
+def test_advgame_rollout_is_the_function_whatever_was_imported_first() -> None:
+    code = (
+        "import advgame.views, advgame.episodes, advgame\n"
+        "assert callable(advgame.rollout) and advgame.rollout.__name__ == 'rollout'\n"
+        "assert advgame.EpisodeResult.__name__ == 'EpisodeResult'\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)

@@ -30,9 +30,9 @@ from advgame.adversaries import ConstantAdversary, ZeroAdversary
 from advgame.checkpoint import SB3Checkpoint, _algo_class
 from advgame.cli import main
 from advgame.config import load_json
+from advgame.episodes import rollout
 from advgame.errors import ConfigError
 from advgame.population import Member, Population
-from advgame.rollout import rollout
 from advgame.training import METHODS, TrainConfig, learner_config, train
 
 HOPPER = "Hopper-v5"

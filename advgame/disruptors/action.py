@@ -115,6 +115,7 @@ class ActionRuntime(AdditiveDisruptor):
             bounded=spec.bounded,
             blocks=[self.sizes[t] for t in targets],
         )
+        self._plan = self._blocks()
 
     def encode(self, value: Any) -> np.ndarray:
         """Raw units -> adversary action: an offset (additive) or the adversary's own action."""
@@ -137,27 +138,47 @@ class ActionRuntime(AdditiveDisruptor):
                 i += n
         return np.concatenate(out).astype(np.float32)
 
-    def action(self, actions: dict[str, Any], u: np.ndarray, rng: np.random.Generator) -> None:
-        """Replace each target's action by its disrupted version."""
-        i = 0
+    def _blocks(self) -> list[tuple[str, slice | None, Any, tuple[np.ndarray, np.ndarray]]]:
+        """Per target: its block of ``u`` and `unit` (``None``: all), its space, its bounds.
+
+        Box bounds are kept in float64, the dtype of the disrupted action before its final
+        cast: clipping against float32 bounds would convert them (exactly) every call.
+        """
+        out, i = [], 0
         for t in self.targets:
             n, space = self.sizes[t], self.spaces[t]
-            block = u[i : i + n]
+            block = None if n == self.shape[0] else slice(i, i + n)
+            if isinstance(space, spaces.Box):
+                bounds = (space.low.astype(np.float64), space.high.astype(np.float64))
+            else:
+                bounds = (np.zeros(0), np.zeros(0))  # unused: Discrete actions are replaced
+            out.append((t, block, space, bounds))
             i += n
+        return out
+
+    def action(self, actions: dict[str, Any], u: np.ndarray, rng: np.random.Generator) -> None:
+        """Replace each target's action by its disrupted version."""
+        for t, block, space, bounds in self._plan:
+            b = u if block is None else u[block]
             if isinstance(space, spaces.Discrete):
                 if rng.random() < self.alpha:
-                    actions[t] = np.int64(space.start + int(np.argmax(block)))
+                    actions[t] = np.int64(space.start + int(np.argmax(b)))
                 continue
-            a = np.asarray(actions[t], dtype=np.float64)
+            a = actions[t]
             if self.mode == "additive":
-                new = a + block * self.unit[i - n : i]
+                # a float array enters the float64 sum exactly as its float64 copy would
+                exact = isinstance(a, np.ndarray) and a.dtype.kind == "f" and a.dtype.itemsize <= 8
+                unit = self.unit if block is None else self.unit[block]
+                new = (a if exact else np.asarray(a, dtype=np.float64)) + b * unit
             else:
-                adv = space.low + (block + 1.0) * 0.5 * (space.high - space.low)
+                a = np.asarray(a, dtype=np.float64)
+                adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
                 if self.mode == "noisy":
                     new = (1.0 - self.alpha) * a + self.alpha * adv
                 else:
                     new = adv if rng.random() < self.alpha else a
-            actions[t] = np.clip(new, space.low, space.high).astype(space.dtype)
+            # = np.clip(new, space.low, space.high), with less dispatch
+            actions[t] = new.clip(*bounds).astype(space.dtype)
 
 
 def _size(space: spaces.Box | spaces.Discrete) -> int:

@@ -35,11 +35,33 @@ __all__ = [
     "Disruptor",
     "DisruptorSpec",
     "Hook",
+    "all_finite",
     "as_budget",
+    "in_unit_box",
     "resolve_targets",
 ]
 
 Hook = Literal["observation", "action", "reward", "environment"]
+
+
+SMALL = 64
+"""Up to this many entries, Python's ``sum(a.tolist())`` beats a numpy reduction."""
+
+
+def all_finite(a: np.ndarray) -> bool:
+    """Whether every entry of the real array `a` is finite; one cheap pass when it is.
+
+    NaN or inf makes the sum (of the entries, or of their squares) non-finite; so can an
+    overflow of finite values, which the exact test then settles.
+    """
+    flat = a if a.ndim == 1 else a.reshape(-1)
+    total = sum(flat.tolist()) if flat.size <= SMALL else flat.dot(flat)
+    return math.isfinite(total) or bool(np.isfinite(a).all())
+
+
+def in_unit_box(u: np.ndarray) -> bool:
+    """Whether every entry of the float array `u` lies in ``[-1, 1]`` (NaN does not)."""
+    return bool(np.maximum.reduce(np.abs(u), initial=0.0) <= 1.0)  # NaN propagates: False
 
 
 def as_budget(value: float | Sequence[float], size: int, what: str) -> np.ndarray:
@@ -161,7 +183,10 @@ class Disruptor(abc.ABC):
 
         """
         try:
-            u = np.asarray(action, dtype=np.float64)
+            if type(action) is np.ndarray:  # astype: the same result as asarray, less dispatch
+                u = action.astype(np.float64, copy=False)
+            else:
+                u = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError):
             raise ActionError(
                 f"Action for {self.agent!r} is not numeric: {action!r}; expected {self.action_space}."
@@ -171,6 +196,18 @@ class Disruptor(abc.ABC):
                 f"Action for {self.agent!r} has shape {u.shape}; expected {self.shape} "
                 f"(its action space is {self.action_space})."
             )
+        if self._passes(u):  # the common case: finite and inside the box, nothing to clip
+            return u, 0
+        return self._decode_slow(u)
+
+    def _passes(self, u: np.ndarray) -> bool:
+        """One cheap test that `u` decodes to itself with no clip (``False`` may be wrong)."""
+        if not self.bounded:
+            return all_finite(u)
+        return self.norm == "linf" and in_unit_box(u)
+
+    def _decode_slow(self, u: np.ndarray) -> tuple[np.ndarray, int]:
+        """The precise checks: raise on NaN/inf, clip and count, project L2 blocks."""
         m = float(np.abs(u).max())  # one reduction: NaN and inf both fail `m <= bound`
         if not math.isfinite(m):
             raise ActionError(

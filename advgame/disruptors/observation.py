@@ -17,6 +17,8 @@ if TYPE_CHECKING:
 
 __all__ = ["ObservationDisruptor", "ObservationRuntime"]
 
+Bounds = tuple[np.ndarray, np.ndarray] | None
+
 
 @dataclass(frozen=True, kw_only=True)
 class ObservationDisruptor(DisruptorSpec):
@@ -119,6 +121,7 @@ class ObservationRuntime(AdditiveDisruptor):
         self.timing = spec.timing
         sizes = [dims[t].size for t in targets]
         super().__init__(spec, self._unit(), bounded=spec.bounded, norm=spec.norm, blocks=sizes)
+        self._plan = self._blocks()
 
     def _unit(self) -> np.ndarray:
         return np.concatenate([self.eps[t] * self.scale[t] for t in self.targets])
@@ -141,25 +144,38 @@ class ObservationRuntime(AdditiveDisruptor):
         self.scale[target] = std[self.dims[target]]
         self.unit = self._unit()
 
+    def _blocks(self) -> list[tuple[str, slice | None, bool, spaces.Box, Bounds]]:
+        """Per target: its block of δ (``None``: all), whether it is whole, its space, its bounds.
+
+        Bounds (``None`` when unbounded) are kept in float64, the dtype of the perturbed
+        observation: clipping against float32 bounds would convert them (exactly) every call.
+        """
+        out, i = [], 0
+        whole = len(self.targets) == 1
+        for t in self.targets:
+            n, space = self.dims[t].size, self.spaces[t]
+            block = None if whole else slice(i, i + n)
+            bounds = (space.low.astype(np.float64), space.high.astype(np.float64))
+            out.append((t, block, self.full[t], space, bounds if self.clip_obs[t] else None))
+            i += n
+        return out
+
     def observation(self, observations: dict[str, Any], u: np.ndarray) -> None:
         """Add δ to each target's observation, clipped into its observation space."""
         delta = self.perturbation(u)
-        i = 0
-        for t in self.targets:
-            n = self.dims[t].size
+        for t, block, full, space, bounds in self._plan:
+            d = delta if block is None else delta[block]
             obs = observations[t]
-            space = self.spaces[t]
-            if self.full[t] and obs.ndim == 1:
-                new = obs + delta[i : i + n]
+            if full and obs.ndim == 1:
+                new = obs + d
             else:
                 new = np.array(obs, dtype=np.float64).reshape(-1)
-                new[self.dims[t]] += delta[i : i + n]
+                new[self.dims[t]] += d
                 new = new.reshape(space.shape)
-            if self.clip_obs[t]:
-                new = np.clip(new, space.low, space.high)
+            if bounds is not None:
+                new = new.clip(*bounds)  # = np.clip(new, space.low, space.high), less dispatch
             if new.dtype != space.dtype:
                 new = (np.rint(new) if np.issubdtype(space.dtype, np.integer) else new).astype(
                     space.dtype
                 )
             observations[t] = new
-            i += n

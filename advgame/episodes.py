@@ -1,4 +1,4 @@
-"""Play whole episodes of a game with one policy per agent, and what they measure.
+"""Play whole episodes of a game with one policy per agent, and what they measure (`rollout`).
 
 This is the evaluation primitive: a `Policy` (or spec, or callable) per agent, a seed, an
 `EpisodeResult` with the protagonists' *true* return (what robust metrics are computed on),
