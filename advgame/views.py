@@ -18,7 +18,7 @@ import numpy as np
 
 from advgame.episodes import build_policies
 from advgame.errors import ConfigError
-from advgame.game import Game, Move
+from advgame.game import Game
 
 __all__ = ["SingleAgentView", "view_factory"]
 
@@ -90,13 +90,12 @@ class SingleAgentView(gym.Env):
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
         """One decision of the learner, then the moves until its next one (or the episode end)."""
+        if self._protagonist:
+            return self._protagonist_step(action)
         actions = self._others()
         actions[self.agent] = action
-        if self._protagonist:
-            tally = self._protagonist_move(self.game.play(actions))
-        else:
-            tally = _Tally()
-            self._play(actions, tally)
+        tally = _Tally()
+        self._play(actions, tally)
         while self.game.agents and self.agent not in self.game.next_movers:
             self._play(self._others(), tally)
         if tally.truncated and self._schedule is not None and self._schedule.exhausted(self.game.t):
@@ -111,22 +110,28 @@ class SingleAgentView(gym.Env):
             tally.info,
         )
 
-    def _protagonist_move(self, move: Move) -> _Tally:
-        """`_play`'s tally of a protagonist's own move into a fresh tally, with fewer steps.
+    def _protagonist_step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
+        """`step` of a protagonist, leaner: what `_play` would tally, with nothing to sum.
 
-        A protagonist's decision is always an act move, and every later move before its next
-        decision is a sense move, which adds nothing to its tally.
+        A protagonist's decision is one act move, and every move before its next decision is
+        a sense move, which adds nothing to its reward or info.
         """
+        game, agent = self.game, self.agent
+        actions = self._others()
+        actions[agent] = action
+        move = game.play(actions)
         assert move.rewards is not None and move.costs is not None and move.info is not None
-        tally = _Tally()
-        tally.reward += move.rewards[self.agent]
-        info = tally.info = dict(move.info)
-        info["cost"] = info.get("cost", 0.0) + move.costs[self.agent]
-        info["true_reward"] = info.get("true_reward", 0.0) + move.reward
-        info["true_cost"] = info.get("true_cost", 0.0) + move.cost
-        info["payoff"] = info.get("payoff", 0.0) + move.payoff
-        tally.terminated, tally.truncated = move.terminated, move.truncated
-        return tally
+        info = dict(move.info)
+        get = info.get  # the task's info may hold these keys; `_play` adds to them
+        info["cost"] = get("cost", 0.0) + move.costs[agent]
+        info["true_reward"] = get("true_reward", 0.0) + move.reward
+        info["true_cost"] = get("true_cost", 0.0) + move.cost
+        info["payoff"] = get("payoff", 0.0) + move.payoff
+        while game.agents and agent not in game.next_movers:
+            sensed = game.play(self._others())
+            assert sensed.rewards is None, "only sense moves come between protagonist decisions"
+        reward = 0.0 + move.rewards[agent]
+        return game.observe(agent), reward, move.terminated, move.truncated, info
 
     def _play(self, actions: dict[str, Any], tally: _Tally) -> None:
         move = self.game.play(actions)

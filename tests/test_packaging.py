@@ -105,16 +105,23 @@ print(json.dumps({"gymnasium": "gymnasium" in sys.modules, "name": game_cls.__na
 
 
 def test_distribution_claims_no_generic_top_level_names(tmp_path: Path) -> None:
-    dist = importlib.metadata.distribution("advgame")
-    top_level = (dist.read_text("top_level.txt") or "").split()
-    assert "advgame" in top_level
-    assert not set(top_level) & set(FOLDERS)
-    for f in dist.files or ():
-        assert f.parts[0] not in FOLDERS, f
-    owners = importlib.metadata.packages_distributions()
-    assert "advgame" in owners.get("advgame", [])
+    # Read the installed metadata from outside the checkout: in the repository root the build's
+    # own advgame.egg-info (source lists) would shadow the installed dist-info.
+    code = """
+import importlib.metadata, json
+dist = importlib.metadata.distribution("advgame")
+owners = importlib.metadata.packages_distributions()
+print(json.dumps({"top_level": (dist.read_text("top_level.txt") or "").split(),
+                  "roots": sorted({f.parts[0] for f in dist.files or ()}),
+                  "owners": {k: v for k, v in owners.items() if "advgame" in v}}))
+"""
+    meta = _python(code, tmp_path)
+    assert "advgame" in meta["top_level"]
+    assert not set(meta["top_level"]) & set(FOLDERS)
+    assert not set(meta["roots"]) & set(FOLDERS), meta["roots"]
+    assert "advgame" in meta["owners"]
     for name in FOLDERS:
-        assert "advgame" not in owners.get(name, []), name
+        assert name not in meta["owners"], name
     # away from the repository, the installed package resolves none of the bare names to ours
     code = f"""
 import json, importlib.util
