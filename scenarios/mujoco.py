@@ -53,24 +53,17 @@ FORCES: dict[str, tuple[tuple[str, ...], str, float]] = {
 ATLA_EPS = {"Ant-v5": 0.15, "HalfCheetah-v5": 0.15, "Hopper-v5": 0.075, "Walker2d-v5": 0.05}
 """ATLA's L∞ observation budgets in normalized units (Zhang et al. 2021)."""
 
-_GRAVITY_WIND = (Param("gravity", 9.81, 19.82), Param("wind", 0.8, 1.2))
+_GRAVITY_WIND: dict = {  # Ant and Humanoid share the appendix's gravity and wind schedule
+    "params": (Param("gravity", 9.81, 19.82), Param("wind", 0.8, 1.2)),
+    "base": (14.715, 1.0),
+    "amp": (4.905, 0.2),
+    "freq": 0.5,
+    "low": (9.81, 0.8),
+    "high": (19.82, 1.2),
+}
 _SHIFTS: dict[str, dict] = {
-    "Ant-v5": {
-        "params": _GRAVITY_WIND,
-        "base": (14.715, 1.0),
-        "amp": (4.905, 0.2),
-        "freq": 0.5,
-        "low": (9.81, 0.8),
-        "high": (19.82, 1.2),
-    },
-    "Humanoid-v5": {
-        "params": _GRAVITY_WIND,
-        "base": (14.715, 1.0),
-        "amp": (4.905, 0.2),
-        "freq": 0.5,
-        "low": (9.81, 0.8),
-        "high": (19.82, 1.2),
-    },
+    "Ant-v5": _GRAVITY_WIND,
+    "Humanoid-v5": _GRAVITY_WIND,
     "Walker2d-v5": {
         "params": (
             Param("length", 0.2, 0.6, names=("torso",)),
