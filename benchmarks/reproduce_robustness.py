@@ -24,13 +24,13 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _stats import fmt as fmt_values
 
 SIGMAS = (0.0, 0.1, 0.15)
 
@@ -137,22 +137,8 @@ def _seed_job(seed: int, args: argparse.Namespace) -> dict:
     )
 
 
-def _interval(values: list[float]) -> tuple[float, float]:
-    from scipy import stats
-
-    mean = float(np.mean(values))
-    if len(values) < 2:
-        return mean, math.nan
-    half = float(
-        stats.t.ppf(0.975, len(values) - 1) * np.std(values, ddof=1) / math.sqrt(len(values))
-    )
-    return mean, half
-
-
 def _markdown(rows: list[dict], args: argparse.Namespace) -> str:
-    keys = list(rows[0])
-    cell = {k: _interval([r[k] for r in rows]) for k in keys}
-    fmt = lambda k: f"{cell[k][0]:.0f} ± {cell[k][1]:.0f}"  # noqa: E731
+    fmt = lambda k: fmt_values([r[k] for r in rows])  # noqa: E731
     lines = [
         f"# Reproduction: robustness of PPO and ATLA-PPO on {args.scenario}",
         "",

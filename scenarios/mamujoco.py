@@ -13,7 +13,8 @@ Presets of every MaMuJoCo scenario (the paper's multi-agent settings, as bounded
 * ``partial``: observation and action adversaries on the first agent only (a partial attack).
 * ``state-gauss-0.1``/``action-gauss-0.1``/``reward-gauss-0.1``: the paper's random mode,
   N(0, 0.1) noise on every agent's state, action or observed reward.
-* ``state-gauss-0.1-partial``: N(0, 0.1) state noise on the first agent only.
+* ``state-gauss-0.1-partial``/``action-gauss-0.1-partial``/``reward-gauss-0.1-partial``: the
+  same noise on the first agent only (the paper's partial attacks).
 """
 
 from __future__ import annotations
@@ -236,6 +237,22 @@ def _force(scenario: str) -> ForceDisruptor:
     return ForceDisruptor(bodies=bodies, axes=axes, max_force=bound)
 
 
+_PARTIAL: dict[str, Any] = {
+    "state": ObservationDisruptor,
+    "action": ActionDisruptor,
+    "reward": RewardDisruptor,
+}
+"""Disruptor spec class per kind of the paper's partial attacks."""
+
+
+def _partial(kind: str, spec: Any) -> Preset:
+    return Preset(
+        (spec,),
+        {spec.agent: GaussianAdversary(std=0.1)},
+        f"paper: partial {kind} noise N(0, 0.1) every step, on {FIRST_AGENT} only",
+    )
+
+
 def _on_all(preset: Preset) -> Preset:
     return dataclasses.replace(preset, description=preset.description + ", on every agent")
 
@@ -273,9 +290,8 @@ def presets(scenario_id: str) -> dict[str, Preset]:
         "state-gauss-0.1": _on_all(paper["state-gauss-0.1"]),
         "action-gauss-0.1": _on_all(paper["action-gauss-0.1"]),
         "reward-gauss-0.1": _on_all(paper["reward-gauss-0.1"]),
-        "state-gauss-0.1-partial": Preset(
-            (ObservationDisruptor(bounded=False, targets=first),),
-            {"observation_adversary": GaussianAdversary(std=0.1)},
-            f"paper: partial state noise N(0, 0.1) every step, on {FIRST_AGENT} only",
-        ),
+        **{
+            f"{kind}-gauss-0.1-partial": _partial(kind, cls(bounded=False, targets=first))
+            for kind, cls in _PARTIAL.items()
+        },
     }

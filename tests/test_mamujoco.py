@@ -280,6 +280,36 @@ def test_partial_preset_attacks_only_the_first_agent(sid: str) -> None:
     game.close()
 
 
+@pytest.mark.parametrize("kind", ["state", "action", "reward"])
+def test_paper_partial_noise_presets_disrupt_only_the_first_agent(kind: str) -> None:
+    preset = f"{kind}-gauss-0.1-partial"
+    spec = advgame.registry.scenario_spec("MA-HalfCheetah-2x3").load_presets()[preset]
+    game = advgame.make("MA-HalfCheetah-2x3", preset=preset)
+    (adversary,) = game.adversaries
+    assert set(spec.adversaries) == {adversary}  # the Gaussian noise is given for that agent
+    assert game.disruptors[adversary].targets == (FIRST_AGENT,)
+    other = game.protagonists[1]
+    true_obs, _ = game.reset(seed=3)
+    ctrl = game.task.sim.data.ctrl
+    push = {adversary: np.full(game.action_space(adversary).shape, 0.3, np.float32)}
+    zero = {p: np.zeros(game.action_space(p).shape, np.float32) for p in game.protagonists}
+    if kind == "state":  # the observation adversary moves first, on the true state
+        shown = game.step({**zero, **push})[0]
+        assert np.array_equal(shown[other], true_obs[other])
+        np.testing.assert_allclose(shown[FIRST_AGENT] - true_obs[FIRST_AGENT], 0.3, rtol=1e-6)
+    _, rewards, _, _, infos = game.step({**zero, **push})  # act move
+    sent = game.task.env.map_global_action_to_local_actions(ctrl)
+    assert np.array_equal(sent[other], zero[other])
+    if kind == "action":
+        np.testing.assert_allclose(sent[FIRST_AGENT], 0.3, rtol=1e-6)
+    else:
+        assert np.array_equal(sent[FIRST_AGENT], zero[FIRST_AGENT])
+    true = infos[other]["true_reward"]
+    assert rewards[other] == true
+    assert (kind == "reward") == (rewards[FIRST_AGENT] == pytest.approx(true + 0.3))
+    game.close()
+
+
 @pytest.mark.parametrize(
     ("sid", "preset"),
     [
