@@ -20,7 +20,7 @@ from advgame.policy import ConstantPolicy, Policy, as_policy
 if TYPE_CHECKING:
     from advgame.game import Game
 
-__all__ = ["EpisodeResult", "build_policies", "filler_action", "rollout"]
+__all__ = ["EpisodeResult", "build_policies", "filler_action", "reseed_policies", "rollout"]
 
 
 @dataclass
@@ -79,6 +79,20 @@ def build_policies(
     return out
 
 
+def reseed_policies(policies: Mapping[str, Policy], seed: int | None) -> None:
+    """Reset every policy; with a `seed`, each gets its own stream derived from it (in order).
+
+    The one rule rollouts and views share, so an episode seeded the same way plays the same.
+    """
+    if seed is None:
+        for p in policies.values():
+            p.reset(None)
+        return
+    seeds = np.random.SeedSequence(seed).generate_state(len(policies))
+    for s, p in zip(seeds, policies.values(), strict=True):
+        p.reset(int(s))
+
+
 def rollout(
     game: Game, policies: Mapping[str, Any], seed: int | None = None, episodes: int = 1
 ) -> list[EpisodeResult]:
@@ -99,13 +113,7 @@ def rollout(
     results = []
     for i in range(episodes):
         ep_seed = None if seed is None else seed + i
-        seeds = (
-            np.random.SeedSequence(ep_seed).generate_state(len(pols))
-            if ep_seed is not None
-            else None
-        )
-        for j, p in enumerate(pols.values()):
-            p.reset(None if seeds is None else int(seeds[j]))
+        reseed_policies(pols, ep_seed)
         game.reset(seed=ep_seed)
         res = EpisodeResult(clipped=dict.fromkeys(game.adversaries, 0))
         first = game.protagonists[0]

@@ -19,11 +19,10 @@ import functools
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
-import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from advgame.episodes import build_policies
+from advgame.episodes import build_policies, reseed_policies
 from advgame.errors import ActionError, ConfigError
 from advgame.game import Game, Move
 
@@ -93,13 +92,7 @@ class TeamView(ParallelEnv):
 
         A seed also seeds every embedded policy (each its own stream derived from `seed`).
         """
-        if seed is not None:
-            seeds = np.random.SeedSequence(seed).generate_state(len(self.policies))
-            for s, p in zip(seeds, self.policies.values(), strict=True):
-                p.reset(int(s))
-        else:
-            for p in self.policies.values():
-                p.reset(None)
+        reseed_policies(self.policies, seed)
         _, game_infos = self.game.reset(seed=seed, options=options)
         self._advance()
         self.agents = list(self.possible_agents)

@@ -14,9 +14,8 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
-from advgame.episodes import build_policies
+from advgame.episodes import build_policies, reseed_policies
 from advgame.errors import ConfigError
 from advgame.game import Game
 
@@ -71,13 +70,7 @@ class SingleAgentView(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         """Reset the game and the embedded policies; play until the learner's first decision."""
         super().reset(seed=seed)
-        if seed is not None:
-            seeds = np.random.SeedSequence(seed).generate_state(len(self.policies))
-            for s, p in zip(seeds, self.policies.values(), strict=True):
-                p.reset(int(s))
-        else:
-            for p in self.policies.values():
-                p.reset(None)
+        reseed_policies(self.policies, seed)
         for _ in range(100):
             _, infos = self.game.reset(seed=seed, options=options)
             info: dict[str, Any] = dict(infos[self.agent])
