@@ -293,7 +293,7 @@ class Game(ParallelEnv):
 
     # -- moves ------------------------------------------------------------------------------
     def _sense(self, actions: Mapping[str, Any]) -> Move:
-        shown = dict(self._shown)
+        shown = self._shown  # the game's own dict (`_begin_step` built it; nobody else holds it)
         clipped: dict[str, int] = {}
         active = self._active
         for d in self._sensing:
@@ -301,7 +301,6 @@ class Game(ParallelEnv):
                 u, clipped[d.agent] = d.decode(actions[d.agent])
                 self._last[d.agent] = u
                 d.observation(shown, u)
-        self._shown = shown
         self.move = ACT
         self.next_movers = self._act_next
         return Move(SENSE, clipped)

@@ -66,6 +66,7 @@ class SingleAgentView(gym.Env):
         self.render_mode = getattr(getattr(game.task, "env", None), "render_mode", None)
         self._protagonist = agent in game.protagonists
         self._schedule = disruptor.schedule if disruptor is not None else None
+        self._players: dict[frozenset[str], list[tuple[str, Any]]] = {}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         """Reset the game and the embedded policies; play until the learner's first decision."""
@@ -112,7 +113,7 @@ class SingleAgentView(gym.Env):
         game, agent = self.game, self.agent
         actions = self._others()
         actions[agent] = action
-        move = game.play(actions)
+        move = game.play(actions)  # checks the learner's action is there, once per decision
         assert move.rewards is not None and move.costs is not None and move.info is not None
         info = dict(move.info)
         get = info.get  # the task's info may hold these keys; `_play` adds to them
@@ -121,7 +122,7 @@ class SingleAgentView(gym.Env):
         info["true_cost"] = get("true_cost", 0.0) + move.cost
         info["payoff"] = get("payoff", 0.0) + move.payoff
         while game.agents and agent not in game.next_movers:
-            sensed = game.play(self._others())
+            sensed = game._sense(self._others())  # only sense moves: all actions built here
             assert sensed.rewards is None, "only sense moves come between protagonist decisions"
         reward = 0.0 + move.rewards[agent]
         return game.observe(agent), reward, move.terminated, move.truncated, info
@@ -149,10 +150,16 @@ class SingleAgentView(gym.Env):
         tally.terminated, tally.truncated = move.terminated, move.truncated
 
     def _others(self) -> dict[str, Any]:
-        game, out = self.game, {}
-        for a in game.next_movers:
-            if a != self.agent:
-                out[a] = self.policies[a].act(game.observe(a))
+        """The embedded policies' actions for the next move (`Game.next_movers` but the learner)."""
+        game = self.game
+        movers = game.next_movers
+        players = self._players.get(movers)
+        if players is None:  # a few distinct mover sets per game: cache each one's policies
+            players = [(a, self.policies[a]) for a in movers if a != self.agent]
+            self._players[movers] = players
+        out = {}
+        for a, policy in players:
+            out[a] = policy.act(game.observe(a))
         return out
 
     def set_policies(self, policies: Mapping[str, Any]) -> None:
@@ -168,6 +175,7 @@ class SingleAgentView(gym.Env):
         built = build_policies(self.game, probe)
         for a in policies:
             self.policies[a] = built[a]
+        self._players.clear()
 
     def set_observation_scale(self, target: str, std: Any) -> None:
         """Set the normalizer std of `target` for normalized-space observation budgets."""

@@ -1,24 +1,30 @@
 """Overhead of the game layers over the raw Gymnasium env, measured side by side in one run.
 
-Three ways of stepping HalfCheetah-v5 with uniformly random actions (drawn before timing):
+Four ways of stepping HalfCheetah-v5 with uniformly random actions (drawn before timing):
 
 * ``raw``: ``gymnasium.make("HalfCheetah-v5")`` (its default wrappers), ``env.step``.
+* ``wrapper``: a reference point, not part of advgame: the same env under a plain
+  ``gymnasium.ObservationWrapper`` that adds ``N(0, 0.1)`` noise (no adversary agent, no checks,
+  no payoff bookkeeping) — the cheapest conventional way to add the same noise.
 * ``view``: the protagonist's `SingleAgentView` of preset ``state-gauss-0.1`` with an embedded
   `GaussianAdversary` (σ = 0.1) on the observation: a sense move and an act move per step.
 * ``parallel``: the full PettingZoo `Game.step` of preset ``default`` (bounded observation and
   action adversaries), random actions for all three agents, two moves per step.
 
-Each is timed for ``--steps`` protagonist steps, in ``--rounds`` interleaved rounds (raw, view,
-parallel, raw, ...) so machine noise hits all three alike. Reported: the best round of each
-(steps/s) with its ratio to the best raw round, and the median over rounds of each round's own
-ratio (view and parallel against the raw run just before them), which drifting load skews
-less. Run: ``python benchmarks/bench_game.py --rounds 5``.
+Each env is built once and stepped in many short segments (``--chunk`` steps), interleaved
+raw, wrapper, view, parallel, raw, ... for ``--rounds`` rounds; episodes run on across segments.
+On a shared or virtualised machine the speed of the whole machine drifts by tens of percent
+within seconds, so each segment is compared with the raw segment just before it: reported are
+the quartiles of those per-round ratios and the median extra time per step in µs.
+Run: ``python benchmarks/bench_game.py`` (``--rounds``, ``--chunk``).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -28,86 +34,116 @@ from advgame.adversaries import GaussianAdversary
 from advgame.views import SingleAgentView
 
 ENV = "HalfCheetah-v5"
+GOALS = {"view": 0.95, "parallel": 0.90}
 
 
-def bench_raw(actions: np.ndarray) -> float:
-    env = gym.make(ENV)
+class _NoiseWrapper(gym.ObservationWrapper):
+    """The reference: N(0, 0.1) added to every observation by a plain Gymnasium wrapper."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.rng = np.random.default_rng(0)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        return observation + self.rng.normal(0.0, 0.1, observation.shape)
+
+
+def _gym_runner(env: gym.Env) -> Callable[[np.ndarray], float]:
     env.reset(seed=0)
-    start = time.perf_counter()
-    for a in actions:
-        _, _, terminated, truncated, _ = env.step(a)
-        if terminated or truncated:
-            env.reset()
-    return len(actions) / (time.perf_counter() - start)
+
+    def run(actions: np.ndarray) -> float:
+        start = time.perf_counter()
+        for a in actions:
+            _, _, terminated, truncated, _ = env.step(a)
+            if terminated or truncated:
+                env.reset()
+        return time.perf_counter() - start
+
+    return run
 
 
-def bench_view(actions: np.ndarray) -> float:
-    game = advgame.make(ENV, preset="state-gauss-0.1")
-    env = SingleAgentView(
-        game, "protagonist", {"observation_adversary": GaussianAdversary(std=0.1)}
-    )
-    env.reset(seed=0)
-    start = time.perf_counter()
-    for a in actions:
-        _, _, terminated, truncated, _ = env.step(a)
-        if terminated or truncated:
-            env.reset()
-    return len(actions) / (time.perf_counter() - start)
-
-
-def bench_parallel(actions: np.ndarray, adv_obs: np.ndarray, adv_act: np.ndarray) -> float:
+def _parallel_runner(adv_obs: np.ndarray, adv_act: np.ndarray) -> Callable[[np.ndarray], float]:
     game = advgame.make(ENV, preset="default")
     game.reset(seed=0)
-    steps = 0
-    start = time.perf_counter()
-    while steps < len(actions):
-        move = {
-            "protagonist": actions[steps],
-            "observation_adversary": adv_obs[steps],
-            "action_adversary": adv_act[steps],
-        }
-        if game.move == "act":
-            steps += 1
-        game.step(move)
-        if not game.agents:
-            game.reset()
-    return len(actions) / (time.perf_counter() - start)
+
+    def run(actions: np.ndarray) -> float:
+        steps = 0
+        start = time.perf_counter()
+        while steps < len(actions):
+            move = {
+                "protagonist": actions[steps],
+                "observation_adversary": adv_obs[steps],
+                "action_adversary": adv_act[steps],
+            }
+            if game.move == "act":
+                steps += 1
+            game.step(move)
+            if not game.agents:
+                game.reset()
+        return time.perf_counter() - start
+
+    return run
+
+
+def runners(chunk: int, rng: np.random.Generator) -> dict[str, Callable[[np.ndarray], float]]:
+    """The four stepping loops, each timing one segment of `chunk` protagonist steps."""
+    view = SingleAgentView(
+        advgame.make(ENV, preset="state-gauss-0.1"),
+        "protagonist",
+        {"observation_adversary": GaussianAdversary(std=0.1)},
+    )
+    adv_obs = rng.uniform(-1, 1, (chunk, 17)).astype(np.float32)
+    adv_act = rng.uniform(-1, 1, (chunk, 6)).astype(np.float32)
+    return {
+        "raw": _gym_runner(gym.make(ENV)),
+        "wrapper": _gym_runner(_NoiseWrapper(gym.make(ENV))),
+        "view": _gym_runner(view),
+        "parallel": _parallel_runner(adv_obs, adv_act),
+    }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=20_000)
-    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--rounds", type=int, default=100)
+    parser.add_argument("--chunk", type=int, default=1000, help="protagonist steps per segment")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    actions = rng.uniform(-1, 1, (args.steps, 6)).astype(np.float32)
-    adv_obs = rng.uniform(-1, 1, (args.steps, 17)).astype(np.float32)
-    adv_act = rng.uniform(-1, 1, (args.steps, 6)).astype(np.float32)
-    runs: dict[str, list[float]] = {"raw": [], "view": [], "parallel": []}
+    actions = rng.uniform(-1, 1, (args.chunk, 6)).astype(np.float32)
+    loops = runners(args.chunk, rng)
+    seconds: dict[str, list[float]] = {k: [] for k in loops}
     for r in range(args.rounds):
-        runs["raw"].append(bench_raw(actions))
-        runs["view"].append(bench_view(actions))
-        runs["parallel"].append(bench_parallel(actions, adv_obs, adv_act))
-        print(
-            f"round {r + 1}/{args.rounds}: "
-            + ", ".join(f"{k} {v[-1]:,.0f}" for k, v in runs.items())
-        )
-    report(runs, args.steps)
+        for key, run in loops.items():
+            seconds[key].append(run(actions))
+        if (r + 1) % max(args.rounds // 10, 1) == 0:
+            print(f"round {r + 1}/{args.rounds}", flush=True)
+    report(seconds, args.chunk)
 
 
-def report(runs: dict[str, list[float]], steps: int) -> None:
-    """Best round of each (steps/s), its ratio to the best raw round, the median per-round ratio."""
-    raw = max(runs["raw"])
-    print(f"\n{ENV}, {steps} steps x {len(runs['raw'])} rounds (steps/s; ratios to raw):")
-    print(f"  {'':29s} {'best':>10s}  {'best/best':>9s}  {'median of rounds':>16s}")
-    print(f"  {'raw gymnasium env':29s} {raw:10,.0f}  {1.0:9.3f}  {1.0:16.3f}")
-    for key, label, goal in (
-        ("view", "protagonist view + N(0,0.1)", 0.95),
-        ("parallel", "ParallelEnv, obs+act advs", 0.90),
-    ):
-        best = max(runs[key])
-        median = float(np.median([v / r for v, r in zip(runs[key], runs["raw"], strict=True)]))
-        print(f"  {label:29s} {best:10,.0f}  {best / raw:9.3f}  {median:16.3f}  (goal >= {goal})")
+def report(seconds: dict[str, list[float]], chunk: int) -> dict[str, Any]:
+    """Print (and return) per-round ratio quartiles and the median extra µs per step."""
+    raw = np.asarray(seconds["raw"])
+    rounds = len(raw)
+    print(
+        f"\n{ENV}: {rounds} interleaved rounds of {chunk} steps each "
+        f"(raw: median {np.median(chunk / raw):,.0f} steps/s)"
+    )
+    print(
+        f"  {'':38s} {'ratio to raw: q25':>17s} {'median':>7s} {'q75':>6s}  {'extra µs/step':>13s}"
+    )
+    out: dict[str, Any] = {}
+    labels = {
+        "wrapper": "plain gym wrapper + N(0,0.1) (reference)",
+        "view": "protagonist view + N(0,0.1)",
+        "parallel": "ParallelEnv, obs+act advs",
+    }
+    for key, label in labels.items():
+        t = np.asarray(seconds[key])
+        q25, med, q75 = np.percentile(raw / t, [25, 50, 75])
+        extra = float(np.median((t - raw) / chunk)) * 1e6
+        goal = f"  (goal >= {GOALS[key]})" if key in GOALS else ""
+        print(f"  {label:40s} {q25:15.3f} {med:7.3f} {q75:6.3f}  {extra:13.1f}{goal}")
+        out[key] = {"median": float(med), "q25": float(q25), "q75": float(q75), "extra_us": extra}
+    return out
 
 
 if __name__ == "__main__":
