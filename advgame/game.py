@@ -22,15 +22,15 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any, ClassVar, cast
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from advgame.disruptors.base import Disruptor, DisruptorSpec, all_finite
+from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import ActionError, ConfigError, did_you_mean
+from advgame.moves import ACT, SENSE, Move, missing_or_unknown, package, protagonist_action
 from advgame.policy import AgentInfo
 from advgame.schedule import PHASES, Schedule
 from advgame.task import TaskBase
@@ -38,34 +38,6 @@ from advgame.task import TaskBase
 __all__ = ["Game", "Move"]
 
 log = logging.getLogger(__name__)
-
-SENSE, ACT = "sense", "act"
-
-
-@dataclass(slots=True)
-class Move:
-    """The outcome of one move in lean form (`Game.play`)."""
-
-    kind: str
-    """``"sense"`` or ``"act"``."""
-    clipped: dict[str, int]
-    """Adversaries whose action counted in this move -> components clipped into the budget."""
-    rewards: dict[str, float] | None = None
-    """Act moves: the reward each protagonist observes (after reward disruptors)."""
-    costs: dict[str, float] | None = None
-    """Act moves: the cost each protagonist observes (after cost disruptors)."""
-    reward: float = 0.0
-    """Act moves: the true team reward."""
-    cost: float = 0.0
-    """Act moves: the true team cost."""
-    payoff: float = 0.0
-    """Act moves: the true payoff ``reward - cost_weight * cost``; adversaries get its negative."""
-    terminated: bool = False
-    """The episode terminated."""
-    truncated: bool = False
-    """The episode was truncated."""
-    info: dict[str, Any] | None = None
-    """Act moves: the task base's info."""
 
 
 class Game(ParallelEnv):
@@ -124,9 +96,9 @@ class Game(ParallelEnv):
             **task.action_spaces,
             **{a: d.action_space for a, d in self.disruptors.items()},
         }
-        self._p_spaces = {  # shape None: a Discrete action
+        self._p_spaces = {  # in protagonist order; shape None: a Discrete action
             p: (s, None if isinstance(s, spaces.Discrete) else s.shape)
-            for p, s in task.action_spaces.items()
+            for p, s in ((p, task.action_spaces[p]) for p in self.protagonists)
         }
         by_hook: dict[str, list[Disruptor]] = {
             "observation": [],
@@ -259,8 +231,9 @@ class Game(ParallelEnv):
         if not self.agents:
             raise ActionError("The episode is over (no live agents); call reset() before step().")
         if actions.keys() != self._all:
-            self._bad_keys(actions)
-        return self._package(self._sense(actions) if self.move == SENSE else self._act(actions))
+            raise missing_or_unknown(actions, self._all, self.agents, self.possible_agents)
+        m = self._sense(actions) if self.move == SENSE else self._act(actions)
+        return package(m, self.protagonists, self.adversaries, self._shown, self._state)
 
     def play(self, actions: Mapping[str, Any]) -> Move:
         """Make one move, lean form: `actions` needs only the agents in `next_movers`.
@@ -316,8 +289,8 @@ class Game(ParallelEnv):
         if self._env_ds:
             self._disrupt_environment(used)
         acts: dict[str, Any] = {}
-        for p in self.protagonists:
-            acts[p] = self._protagonist_action(p, actions[p])
+        for p, (space, shape) in self._p_spaces.items():
+            acts[p] = protagonist_action(p, space, shape, actions[p])
         for d in self._action_ds:
             v = self._effective(d, used)
             if v is not None:
@@ -339,35 +312,6 @@ class Game(ParallelEnv):
         else:
             self._begin_step(obs, used)
         return Move(ACT, clipped, rewards, costs, reward, cost, payoff, terminated, truncated, info)
-
-    def _package(self, m: Move) -> tuple[dict, dict, dict, dict, dict]:
-        infos: dict[str, dict] = {}
-        if m.kind == SENSE:
-            rewards = dict.fromkeys(self.protagonists, 0.0)
-            adversary_reward = 0.0
-            for p in self.protagonists:
-                infos[p] = {"acted": False}
-        else:
-            assert m.rewards is not None and m.costs is not None and m.info is not None
-            rewards, adversary_reward = dict(m.rewards), -m.payoff
-            for p in self.protagonists:
-                infos[p] = {
-                    **m.info,
-                    "acted": True,
-                    "true_reward": m.reward,
-                    "true_cost": m.cost,
-                    "cost": m.costs[p],
-                    "payoff": m.payoff,
-                }
-        obs, state, clipped = dict(self._shown), self._state, m.clipped
-        for a in self.adversaries:  # plain loops: cheaper than merging dicts
-            obs[a] = state
-            rewards[a] = adversary_reward
-            infos[a] = {"acted": a in clipped, "clipped": clipped.get(a, 0)}
-        terms, truncs = {}, {}
-        for a in self.possible_agents:
-            terms[a], truncs[a] = m.terminated, m.truncated
-        return obs, rewards, terms, truncs, infos
 
     def _disrupt_environment(self, used: dict[str, np.ndarray]) -> None:
         # `_env_ds` lists model edits (dynamics, which may recompile the model) before data
@@ -425,37 +369,6 @@ class Game(ParallelEnv):
             u = self._last.get(d.agent)
         return u
 
-    def _protagonist_action(self, agent: str, action: Any) -> Any:
-        space, shape = self._p_spaces[agent]
-        if shape is None:
-            return self._discrete_action(agent, cast(spaces.Discrete, space), action)
-        a = action if type(action) is np.ndarray else np.asarray(action)
-        if a.dtype != space.dtype:
-            try:
-                a = a.astype(space.dtype)
-            except (TypeError, ValueError):
-                raise ActionError(
-                    f"Action for {agent!r} is not numeric: {action!r} ({space})."
-                ) from None
-        if a.shape != shape:
-            raise ActionError(
-                f"Action for {agent!r} has shape {a.shape}; expected {shape} ({space})."
-            )
-        if not all_finite(a):
-            raise ActionError(f"Action for {agent!r} contains NaN or inf: {a}.")
-        return a
-
-    @staticmethod
-    def _discrete_action(agent: str, space: spaces.Discrete, action: Any) -> np.int64:
-        try:
-            ok = np.ndim(action) == 0 and float(action) == int(action)
-            ok = ok and space.contains(np.int64(action))
-        except (TypeError, ValueError, OverflowError):  # None, "left", nan, inf
-            ok = False
-        if not ok:
-            raise ActionError(f"Action for {agent!r} must be an int in {space}, got {action!r}.")
-        return np.int64(action)
-
     def _restore_environment(self) -> None:
         if not self._env_ds:
             return
@@ -473,21 +386,6 @@ class Game(ParallelEnv):
                 f"Agents of this game: {self.possible_agents}."
             )
         return agent
-
-    def _bad_keys(self, actions: Mapping[str, Any]) -> None:
-        missing = sorted(self._all - actions.keys())
-        unknown = sorted(set(actions) - self._all)
-        msg = []
-        if missing:
-            msg.append(f"missing actions for {missing}")
-        if unknown:
-            hint = "".join(did_you_mean(u, self.possible_agents) for u in unknown)
-            msg.append(f"actions for unknown agents {unknown}.{hint}")
-        raise ActionError(
-            f"step() needs one action for every live agent {self.agents}: {'; '.join(msg)}. "
-            "Agents whose action does not count this move (see game.next_movers) may send "
-            "any valid action, e.g. action_space(agent).sample()."
-        )
 
     def __str__(self) -> str:
         return repr(self)
