@@ -39,6 +39,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import step_through
 
 from advgame.checkpoint import SB3Checkpoint
 from advgame.evaluation import AdversarySetup, PayoffTable, evaluate, population_jobs
@@ -108,13 +109,7 @@ def spin(steps: int) -> float:
 
     env = gym.make(ENV)
     env.reset(seed=0)
-    actions = np.random.default_rng(0).uniform(-1, 1, (steps, 6))
-    start = time.perf_counter()
-    for a in actions:
-        _, _, terminated, truncated, _ = env.step(a)
-        if terminated or truncated:
-            env.reset()
-    return time.perf_counter() - start
+    return step_through(env, np.random.default_rng(0).uniform(-1, 1, (steps, 6)))
 
 
 def ceiling(steps: int) -> float:

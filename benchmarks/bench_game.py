@@ -22,12 +22,14 @@ Run: ``python benchmarks/bench_game.py`` (``--rounds``, ``--chunk``).
 from __future__ import annotations
 
 import argparse
+import functools
 import time
 from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from _common import step_through
 
 import advgame
 from advgame.adversaries import GaussianAdversary
@@ -50,16 +52,7 @@ class _NoiseWrapper(gym.ObservationWrapper):
 
 def _gym_runner(env: gym.Env) -> Callable[[np.ndarray], float]:
     env.reset(seed=0)
-
-    def run(actions: np.ndarray) -> float:
-        start = time.perf_counter()
-        for a in actions:
-            _, _, terminated, truncated, _ = env.step(a)
-            if terminated or truncated:
-                env.reset()
-        return time.perf_counter() - start
-
-    return run
+    return functools.partial(step_through, env)
 
 
 def _parallel_runner(adv_obs: np.ndarray, adv_act: np.ndarray) -> Callable[[np.ndarray], float]:

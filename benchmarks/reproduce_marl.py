@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _stats import fmt
+from _common import fmt
 
 KINDS = ("state", "action", "reward")
 CONDITIONS = ("nominal", *(f"{k}-gauss-0.1{p}" for k in KINDS for p in ("", "-partial")))

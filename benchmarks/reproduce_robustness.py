@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _stats import fmt as fmt_values
+from _common import fmt as fmt_values
 
 SIGMAS = (0.0, 0.1, 0.15)
 

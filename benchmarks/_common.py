@@ -1,0 +1,25 @@
+"""Helpers shared by the benchmark and reproduction scripts."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from advgame.payoff import ci95
+
+
+def fmt(values: list[float]) -> str:
+    """``"mean ± half-width"`` of `values` (95 % Student-t interval), rounded to integers."""
+    return f"{float(np.mean(values)):.0f} ± {ci95(values):.0f}"
+
+
+def step_through(env: Any, actions: np.ndarray) -> float:
+    """Step a Gymnasium env with each of `actions` (resetting at episode ends); wall seconds."""
+    start = time.perf_counter()
+    for a in actions:
+        _, _, terminated, truncated, _ = env.step(a)
+        if terminated or truncated:
+            env.reset()
+    return time.perf_counter() - start
