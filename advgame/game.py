@@ -96,10 +96,10 @@ class Game(ParallelEnv):
             **task.action_spaces,
             **{a: d.action_space for a, d in self.disruptors.items()},
         }
-        self._p_spaces = {  # in protagonist order; shape None: a Discrete action
-            p: (s, None if isinstance(s, spaces.Discrete) else s.shape)
-            for p, s in ((p, task.action_spaces[p]) for p in self.protagonists)
-        }
+        self._p_spaces: dict[str, tuple[spaces.Space, tuple[int, ...] | None]] = {}
+        for p in self.protagonists:  # in protagonist order; shape None: a Discrete action
+            s = task.action_spaces[p]
+            self._p_spaces[p] = (s, None if isinstance(s, spaces.Discrete) else s.shape)
         by_hook: dict[str, list[Disruptor]] = {
             "observation": [],
             "action": [],

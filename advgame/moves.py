@@ -83,10 +83,8 @@ def package(
         obs[a] = state
         rewards[a] = adversary_reward
         infos[a] = {"acted": a in clipped, "clipped": clipped.get(a, 0)}
-    terms, truncs = {}, {}
-    for a in (*protagonists, *adversaries):
-        terms[a], truncs[a] = m.terminated, m.truncated
-    return obs, rewards, terms, truncs, infos
+    # `obs` now holds every agent, protagonists first: the order of `possible_agents`
+    return obs, rewards, dict.fromkeys(obs, m.terminated), dict.fromkeys(obs, m.truncated), infos
 
 
 def protagonist_action(
