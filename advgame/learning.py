@@ -17,7 +17,7 @@ import numpy as np
 
 from advgame.checkpoint import SB3Checkpoint
 
-__all__ = ["EpisodeStats", "Side"]
+__all__ = ["EpisodeStats", "Side", "normalized"]
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +69,15 @@ class EpisodeStats:
         return (float(np.mean(values)) if values else float("nan")), len(values), clipped
 
 
+def normalized(venv: Any, normalize: bool, gamma: float) -> Any:
+    """`venv` under SB3's `VecNormalize` (observations and rewards, discount `gamma`) if asked."""
+    if not normalize:
+        return venv
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    return VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=gamma)
+
+
 class Side:
     """One learning agent: views of `agent`, an optional normalizer, and its SB3 model.
 
@@ -102,9 +111,7 @@ class Side:
         self.agent = agent
         self.learner = learner
         if venv is None:
-            venv = _make_venv(env_fns, vec_env)
-            if normalize:
-                venv = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=learner.gamma)
+            venv = normalized(_make_venv(env_fns, vec_env), normalize, learner.gamma)
         self.venv = venv
         self.normalized = isinstance(venv, VecNormalize)
         self.model = model or learner.make_model(venv, seed, total_steps, tensorboard_log)

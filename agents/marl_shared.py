@@ -26,7 +26,7 @@ import numpy as np
 
 from advgame.checkpoint import SB3Checkpoint
 from advgame.errors import ConfigError
-from advgame.learning import EpisodeStats
+from advgame.learning import EpisodeStats, normalized
 
 __all__ = ["SharedIPPO", "shared_venv"]
 
@@ -122,9 +122,7 @@ class SharedIPPO:
 
         self.config = config
         if venv is None:
-            venv = shared_venv(env_fn, n_envs)
-            if normalize:
-                venv = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=config.gamma)
+            venv = normalized(shared_venv(env_fn, n_envs), normalize, config.gamma)
         self.venv = venv
         self.normalized = isinstance(venv, VecNormalize)
         self.agents: list[str] = list(self._views()[0].possible_agents)

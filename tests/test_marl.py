@@ -46,12 +46,7 @@ SHORT = 25
 """Episode length of the conformance tests (MaMuJoCo's 1000 steps would only slow them)."""
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def noisy(game: advgame.Game, std: float = 0.05) -> dict[str, Any]:

@@ -36,12 +36,7 @@ def observation_adversary_view() -> SingleAgentView:
     return SingleAgentView(game, "observation_adversary", {"protagonist": fixed_hopper_protagonist})
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _snapshot(model: PPO) -> dict[str, torch.Tensor]:
