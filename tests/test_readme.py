@@ -1,4 +1,5 @@
-"""Every Python example in the README runs as written (in a scratch directory)."""
+"""Every Python example in the README and in the docs/ pages runs as written (in a scratch
+directory)."""
 
 from __future__ import annotations
 
@@ -7,19 +8,28 @@ from pathlib import Path
 
 import pytest
 
-README = Path(__file__).resolve().parents[1] / "README.md"
-BLOCKS = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+PAGES = [README, *sorted((ROOT / "docs").glob("*.md"))]
+"""The README and the per-family pages it links (docs/*.md; reproduction folders hold results)."""
+BLOCKS = [
+    (page.relative_to(ROOT).as_posix(), index, code)
+    for page in PAGES
+    for index, code in enumerate(re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S))
+]
 
 
 def test_readme_has_python_examples() -> None:
-    assert len(BLOCKS) >= 8
+    assert sum(1 for name, _, _ in BLOCKS if name == "README.md") >= 8
 
 
-@pytest.mark.parametrize("index", range(len(BLOCKS)))
-def test_readme_example_runs(index: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize(("page", "index", "code"), BLOCKS, ids=[f"{p}[{i}]" for p, i, _ in BLOCKS])
+def test_example_runs(
+    page: str, index: int, code: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.chdir(tmp_path)
-    code = compile(BLOCKS[index], f"README.md[python block {index}]", "exec")
-    exec(code, {"__name__": f"readme_block_{index}"})
+    compiled = compile(code, f"{page}[python block {index}]", "exec")
+    exec(compiled, {"__name__": f"example_{Path(page).stem}_{index}"})
 
 
 def test_readme_opens_with_the_two_setup_commands() -> None:
