@@ -35,8 +35,10 @@ def _cmd_list(args: argparse.Namespace) -> int:
     ids = args.ids or list_scenarios(args.family)
     for sid in ids:
         spec = scenario_spec(sid)
-        print(f"{sid:28s} {spec.family:8s} {spec.description}")
-        if args.presets:
+        absent = spec.missing()
+        note = f'  [needs: pip install "advgame[{spec.extra}]"]' if absent else ""
+        print(f"{sid:28s} {spec.family:8s} {spec.description}{note}")
+        if args.presets and not absent:
             for name, preset in sorted(spec.load_presets().items()):
                 print(f"    {name:24s} {preset.description}")
     return 0

@@ -10,6 +10,7 @@ __all__ = [
     "AdvgameError",
     "BudgetError",
     "ConfigError",
+    "MissingExtraError",
     "UnknownNameError",
     "UnknownScenarioError",
     "did_you_mean",
@@ -37,6 +38,13 @@ class UnknownNameError(ConfigError, KeyError):
 
 class UnknownScenarioError(UnknownNameError):
     """`make` was given a scenario id that is not registered."""
+
+
+class MissingExtraError(AdvgameError, ImportError):
+    """An optional package a scenario needs is not installed.
+
+    The message names the advgame extra that brings it (``pip install "advgame[box2d]"``).
+    """
 
 
 class ActionError(AdvgameError, ValueError):

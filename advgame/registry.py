@@ -8,11 +8,18 @@ scenario is made, so listing scenarios imports no simulator. The built-in scenar
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from advgame.errors import ConfigError, UnknownNameError, UnknownScenarioError, did_you_mean
+from advgame.errors import (
+    ConfigError,
+    MissingExtraError,
+    UnknownNameError,
+    UnknownScenarioError,
+    did_you_mean,
+)
 
 if TYPE_CHECKING:
     from advgame.disruptors.base import DisruptorSpec
@@ -63,6 +70,24 @@ class ScenarioSpec:
     """One line on the task."""
     default_preset: str = "default"
     """The preset `make` uses when given neither a preset nor disruptors."""
+    extra: str = ""
+    """The advgame extra that installs this scenario's simulator (``"box2d"``, ``"mamujoco"``,
+    ...); empty for scenarios the core install runs."""
+    requires: tuple[str, ...] = ()
+    """Top-level modules the task base needs; `make` checks them first and names `extra`."""
+
+    def missing(self) -> list[str]:
+        """The modules of `requires` that are not installed (cheap: nothing is imported)."""
+        return [name for name in self.requires if importlib.util.find_spec(name) is None]
+
+    def check_installed(self) -> None:
+        """Raise `MissingExtraError`, naming the extra to install, if a required module is missing."""
+        absent = self.missing()
+        if absent:
+            raise MissingExtraError(
+                f"Scenario {self.id!r} ({self.family}) needs {', '.join(map(repr, absent))}, "
+                f'which is not installed. Install it with: pip install "advgame[{self.extra}]"'
+            )
 
     def load_presets(self) -> dict[str, Preset]:
         """Import and return this scenario's presets."""
@@ -141,6 +166,7 @@ def make(
     from advgame.game import Game
 
     spec = scenario_spec(scenario_id)
+    spec.check_installed()
     chosen = None
     if disruptors is not None and preset is not None:
         raise ConfigError("Give either preset=... or disruptors=..., not both.")

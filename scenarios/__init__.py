@@ -17,7 +17,15 @@ _MUJOCO = "advgame.scenarios.mujoco"
 _BOX2D = "advgame.scenarios.box2d"
 
 
+EXTRAS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "mujoco": ("", ()),
+    "box2d": ("box2d", ("Box2D", "pygame")),
+}
+"""Family -> (the advgame extra that installs it, the modules its task base imports)."""
+
+
 def _gym(env_id: str, family: str, module: str, description: str) -> None:
+    extra, requires = EXTRAS[family]
     register(
         ScenarioSpec(
             id=env_id,
@@ -26,6 +34,8 @@ def _gym(env_id: str, family: str, module: str, description: str) -> None:
             task_kwargs={"env_id": env_id},
             family=family,
             description=description,
+            extra=extra,
+            requires=requires,
         )
     )
 

@@ -100,6 +100,8 @@ def _spec(v: Variant) -> ScenarioSpec:
         task_kwargs={"scenario": v.scenario, "agent_conf": v.agent_conf},
         family=FAMILY,
         description=v.description,
+        extra="mamujoco",
+        requires=("gymnasium_robotics",),
     )
 
 

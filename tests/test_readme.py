@@ -1,5 +1,4 @@
-"""Every Python example in the README and in the docs/ pages runs as written (in a scratch
-directory)."""
+"""Every Python example in the README and the docs/ pages runs as written (in a scratch dir)."""
 
 from __future__ import annotations
 
@@ -39,4 +38,7 @@ def test_readme_opens_with_the_two_setup_commands() -> None:
     lines = [line for line in first_block.group(1).splitlines() if line.strip()]
     assert len(lines) == 2
     assert "advgame demo" in lines[0]
-    assert 'pip install -e ".[test]"' in lines[1] and "pytest" in lines[1]
+    # both install the lock (constraints.txt) with every extra; the second adds the test tools
+    assert all("-c constraints.txt" in line for line in lines)
+    assert '".[all]"' in lines[0]
+    assert '".[all,test]"' in lines[1] and "pytest" in lines[1]
