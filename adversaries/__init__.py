@@ -1,4 +1,4 @@
-"""Adversary policies: noise, scheduled shifts, and (later) learned and LLM adversaries.
+"""Adversary policies: noise, scheduled shifts, white-box attacks (MAD, critic, PGD), and more.
 
 Every adversary here is a frozen, picklable *spec* with ``build(info) -> Policy``; the built
 policy speaks the one `advgame.policy.Policy` interface (``reset(seed)``, ``act(obs)``), so
@@ -20,10 +20,14 @@ from advgame.adversaries.noise import (
     ZeroAdversary,
 )
 from advgame.adversaries.scheduled import ConstantAdversary, SinusoidAdversary
+from advgame.adversaries.whitebox import CriticAttack, MADAttack, PGDAttack
 
 __all__ = [
     "ConstantAdversary",
+    "CriticAttack",
     "GaussianAdversary",
+    "MADAttack",
+    "PGDAttack",
     "RandomAdversary",
     "SinusoidAdversary",
     "UniformAdversary",

@@ -42,6 +42,10 @@ def load_model(path: str, algo: str) -> Any:
 class SB3Policy:
     """An SB3 model's policy, behind the observation normalizer it was trained with.
 
+    It is also a `advgame.policy.WhiteBox`: attacks may differentiate its networks (PPO's
+    Gaussian actor and value head; SAC's and TD3's actor and Q critic) through the same frozen
+    normalizer, without training them.
+
     Args:
         model: the SB3 model (its ``policy`` is used; nothing is trained).
         obs_mean, obs_var: the frozen normalizer statistics, or None if unnormalized.
@@ -110,6 +114,56 @@ class SB3Policy:
         if self._box is not None:
             out = policy.unscale_action(out) if self._squash else np.clip(out, *self._box)
         return out
+
+    # -- white-box access (`advgame.policy.WhiteBox`): forward passes only, nothing trained ----
+    def _features(self, obs: Any) -> Any:
+        """Raw observation batch -> the network's input (normalized and clipped as in training)."""
+        import torch
+
+        self.model.policy.set_training_mode(False)
+        if self.mean is None or self.std is None:
+            return obs
+        mean = torch.as_tensor(self.mean, dtype=torch.float32)
+        std = torch.as_tensor(self.std, dtype=torch.float32)
+        return ((obs - mean) / std).clamp(-self.clip_obs, self.clip_obs)
+
+    def action_mean(self, obs: Any) -> Any:
+        """The mean action (PPO: the Gaussian's mean; SAC/TD3: the deterministic actor's)."""
+        policy, x = self.model.policy, self._features(obs)
+        if hasattr(policy, "get_distribution"):
+            dist = policy.get_distribution(x).distribution
+            if not hasattr(dist, "mean") or not hasattr(dist, "stddev"):
+                raise ConfigError(
+                    f"White-box attacks need a Gaussian policy; this one acts through {dist}."
+                )
+            return dist.mean
+        if getattr(policy, "actor", None) is None:
+            raise ConfigError(f"{type(policy).__name__} has no actor network to attack.")
+        if hasattr(policy.actor, "action_dist"):  # SAC: the squashed Gaussian's mode
+            return policy.actor(x, deterministic=True)
+        return policy.actor(x)
+
+    def action_std(self) -> Any:
+        """PPO's state-independent action std; ``None`` for SAC/TD3 (attacked through means)."""
+        log_std = getattr(self.model.policy, "log_std", None)
+        return None if log_std is None else log_std.detach().exp()
+
+    def value(self, obs: Any) -> Any:
+        """PPO's value head ``V(obs)``; ``None`` for SAC/TD3."""
+        policy = self.model.policy
+        if not hasattr(policy, "predict_values"):
+            return None
+        return policy.predict_values(self._features(obs)).squeeze(-1)
+
+    def q_value(self, obs: Any, action: Any) -> Any:
+        """SAC's/TD3's critic ``min_i Q_i(obs, action)``; ``None`` for PPO."""
+        import torch
+
+        critic = getattr(self.model.policy, "critic", None)
+        if critic is None:
+            return None
+        qs = critic(self._features(obs), action)
+        return torch.min(torch.cat(qs, dim=-1), dim=-1).values
 
 
 @dataclass(frozen=True)

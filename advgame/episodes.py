@@ -58,7 +58,9 @@ def build_policies(
     """One `Policy` per agent of `game`.
 
     Adversaries not in `policies` get their no-op (the identity) when `default="noop"`;
-    protagonists must always be given. Unknown agent ids are an error.
+    protagonists must always be given. Unknown agent ids are an error. An adversary policy with
+    an ``attach(game, victims)`` method (a white-box attack) is then given the game and the
+    protagonist policies built here.
     """
     unknown = set(policies) - set(game.possible_agents)
     if unknown:
@@ -76,6 +78,11 @@ def build_policies(
             raise ConfigError(
                 f"No policy given for {agent!r}; pass one in policies={{{agent!r}: ...}}."
             )
+    victims = {p: out[p] for p in game.protagonists if p in out}
+    for agent in game.adversaries:
+        attach = getattr(out.get(agent), "attach", None)
+        if attach is not None:
+            attach(game, victims)
     return out
 
 

@@ -256,6 +256,15 @@ class Game(ParallelEnv):
         """What `agent` observes now: protagonists the (perturbed) observation, adversaries ``s_t``."""
         return self._shown[agent] if agent in self._shown else self._state
 
+    def true_observation(self, agent: str) -> Any:
+        """Protagonist `agent`'s true observation at the current step (before any disruptor).
+
+        White-box attacks read it in the sense move: the observation adversary sees ``s_t``.
+        """
+        if agent not in self.protagonists:
+            raise ConfigError(f"{agent!r} is not a protagonist; protagonists: {self.protagonists}.")
+        return self._true_obs[agent]
+
     def render(self) -> Any:
         """Render the task base."""
         return self.task.render()

@@ -21,7 +21,15 @@ from advgame.errors import ConfigError
 if TYPE_CHECKING:
     from advgame.disruptors.base import Disruptor
 
-__all__ = ["AgentInfo", "CallablePolicy", "ConstantPolicy", "Policy", "PolicySpec", "as_policy"]
+__all__ = [
+    "AgentInfo",
+    "CallablePolicy",
+    "ConstantPolicy",
+    "Policy",
+    "PolicySpec",
+    "WhiteBox",
+    "as_policy",
+]
 
 
 @runtime_checkable
@@ -41,6 +49,28 @@ class PolicySpec(Protocol):
 
     def build(self, info: AgentInfo) -> Policy:
         """Build the policy for the agent described by `info`."""
+
+
+@runtime_checkable
+class WhiteBox(Protocol):
+    """A protagonist policy whose networks a white-box attack may differentiate (never train).
+
+    Every method takes a batch of *raw* observations as a float32 torch tensor ``[batch, obs]``
+    and applies the policy's own frozen normalizer, so an attack works in the units the game
+    uses. Implemented by `advgame.checkpoint.SB3Policy` and the MAPPO/IPPO actor policies.
+    """
+
+    def action_mean(self, obs: Any) -> Any:
+        """The action the policy would take (its distribution's mean), differentiable in `obs`."""
+
+    def action_std(self) -> Any:
+        """The standard deviation of a Gaussian policy's actions, or ``None`` (deterministic)."""
+
+    def value(self, obs: Any) -> Any:
+        """The state-value estimate ``V(obs)`` (``[batch]``), or ``None`` if the policy has none."""
+
+    def q_value(self, obs: Any, action: Any) -> Any:
+        """The action-value estimate ``Q(obs, action)`` (``[batch]``), or ``None``."""
 
 
 @dataclass(frozen=True)

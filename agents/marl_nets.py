@@ -309,12 +309,14 @@ class TorchActorPolicy:
 
     Acts with the Gaussian's mean (`deterministic`) or samples it with its own generator
     (reseeded by `reset(seed)`); actions are clipped into the action space, as in training.
+    It is an `advgame.policy.WhiteBox` (actor only: MAD attacks it; the critic is not saved).
     """
 
     def __init__(self, record: Mapping[str, Any], deterministic: bool = True) -> None:
         arch = record["arch"]
         actor = GaussianActor(arch["obs_dim"], arch["act_dim"], arch["hidden"])
         actor.load_state_dict(record["state_dict"])
+        self.actor = actor.eval()
         self.mean = NumpyMLP(actor.mean)
         self.std = actor.log_std.detach().exp().numpy()
         self.norm: RunningNorm | None = None
@@ -338,6 +340,28 @@ class TorchActorPolicy:
         if not self.deterministic:
             action = action + self.std * self._rng.standard_normal(action.shape)
         return np.clip(action, self.low, self.high).astype(np.float32)
+
+    # -- white-box access (`advgame.policy.WhiteBox`): forward passes only ------------------
+    def action_mean(self, obs: torch.Tensor) -> torch.Tensor:
+        """The Gaussian's mean for a batch of raw observations, behind the frozen normalizer."""
+        x = obs
+        if self.norm is not None:
+            mean = torch.as_tensor(self.norm.mean, dtype=torch.float32)
+            std = torch.as_tensor(self.norm.std, dtype=torch.float32)
+            x = ((obs - mean) / std).clamp(-self.norm.clip, self.norm.clip)
+        return self.actor.mean(x)
+
+    def action_std(self) -> torch.Tensor:
+        """The state-independent action std."""
+        return torch.as_tensor(self.std, dtype=torch.float32)
+
+    def value(self, obs: torch.Tensor) -> None:
+        """Actors files hold no critic."""
+        return None
+
+    def q_value(self, obs: torch.Tensor, action: torch.Tensor) -> None:
+        """Actors files hold no critic."""
+        return None
 
 
 @functools.lru_cache(maxsize=32)

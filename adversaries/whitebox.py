@@ -1,0 +1,310 @@
+"""White-box observation attacks: MAD, critic and PGD on the frozen protagonist's own networks.
+
+The robust-RL literature evaluates a policy against attacks that read its networks (Zhang et
+al. 2020, "Robust Deep RL against Adversarial Perturbations on State Observations"; Pattanaik
+et al. 2018): a few projected gradient steps per step, typically far stronger than noise of
+the same budget and needing no training. Here each attack is an ordinary adversary spec for
+an `ObservationDisruptor` agent, so it sits in payoff tables and populations like noise or a
+trained network:
+
+* `MADAttack` — maximal action difference: maximise the divergence between ``π(·|s)`` and
+  ``π(·|s+δ)`` (the KL of the two Gaussians for a stochastic policy, the squared distance of
+  the actions for a deterministic one);
+* `CriticAttack` — minimise the protagonist's own value estimate: ``Q(s, μ(s+δ))`` for SAC/TD3
+  (Pattanaik et al.), ``V(s+δ)`` for PPO;
+* `PGDAttack` — maximise a user-given differentiable objective.
+
+How it plays: `advgame.episodes.build_policies` attaches the attack to the game and to the
+protagonist policies it attacks (each must be an `advgame.policy.WhiteBox`: an SB3 policy with
+its normalizer, or a MAPPO/IPPO actor). In the sense move the attack reads each target's true
+observation ``s_t`` and runs projected gradient ascent on the adversary's own action ``u``:
+inside ``[-1, 1]^k`` (L∞) or each target's unit ball (L2), which the disruptor maps to
+``δ = ε ⊙ u`` in raw or normalized units. So the attack is in the budget by construction, and
+the disruptor still clips and counts. Gradients are taken with respect to ``u`` only
+(`torch.autograd.grad`): the protagonist's parameters, gradients and optimizer are untouched.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from advgame.disruptors.observation import ObservationRuntime
+from advgame.errors import ConfigError
+from advgame.policy import AgentInfo, WhiteBox
+
+if TYPE_CHECKING:
+    import torch
+
+    from advgame.game import Game
+
+__all__ = ["CriticAttack", "MADAttack", "PGDAttack", "WhiteBoxAttackPolicy"]
+
+_RADIUS = 1.0 - 1e-6
+"""L2 attacks stay this far inside the unit ball: rounding to float32 must not leave it."""
+
+Objective = Callable[[WhiteBox, "torch.Tensor", "torch.Tensor"], "torch.Tensor"]
+"""``(victim, true observations [1, n], perturbed observations [1, n]) -> scalar to maximise``."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Attack:
+    """Projected gradient ascent on the adversary's action; the options every attack shares.
+
+    Each walk starts uniformly at random in the budget and takes `steps` projected steps; the
+    best iterate of all walks (by the attack's objective) is played.
+    """
+
+    steps: int = 10
+    """Gradient steps per attacked step (SA-PPO's evaluation uses 10)."""
+    step_size: float | None = None
+    """Step length in the adversary's action units (the budget is 1); default ``2.5 / steps``
+    (Madry et al.'s rule: the walk can cross the ball 2.5 times)."""
+    restarts: int = 0
+    """Extra random starts; the start reaching the highest objective is played."""
+
+    def __post_init__(self) -> None:
+        if type(self.steps) is not int or self.steps < 1:
+            raise ConfigError(
+                f"{type(self).__name__}.steps must be an int >= 1, got {self.steps!r}."
+            )
+        if type(self.restarts) is not int or self.restarts < 0:
+            raise ConfigError(
+                f"{type(self).__name__}.restarts must be an int >= 0, got {self.restarts!r}."
+            )
+        if self.step_size is not None and not (np.isfinite(self.step_size) and self.step_size > 0):
+            raise ConfigError(
+                f"{type(self).__name__}.step_size must be a finite number > 0 (or None for "
+                f"2.5 / steps), got {self.step_size!r}."
+            )
+
+    def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
+        """What the attack maximises (a scalar tensor)."""
+        raise NotImplementedError
+
+    def check_victim(self, agent: str, victim: WhiteBox, probe: torch.Tensor) -> None:
+        """Raise if `victim` lacks what this attack differentiates (`probe`: a zero batch)."""
+
+    def build(self, info: AgentInfo) -> WhiteBoxAttackPolicy:
+        """The attack for observation adversary `info.agent` (attached to its victims later)."""
+        return WhiteBoxAttackPolicy(self, info)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MADAttack(_Attack):
+    """Maximal action difference (Zhang et al. 2020): push ``π(·|s+δ)`` away from ``π(·|s)``.
+
+    For a Gaussian policy with state-independent std σ (PPO, MAPPO/IPPO actors) the objective
+    is ``KL(π(·|s) ‖ π(·|s+δ)) = Σ (μ(s+δ) − μ(s))² / 2σ²``; for a deterministic actor (SAC's
+    mode, TD3) it is ``‖μ(s+δ) − μ(s)‖²``.
+
+    Example:
+        >>> attack = MADAttack(steps=5, restarts=2)  # 3 starts of 5 steps each, per step
+        >>> attack.steps * (1 + attack.restarts)
+        15
+
+    """
+
+    def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
+        """The KL (or squared distance) between the clean and the attacked action."""
+        import torch
+
+        with torch.no_grad():
+            reference = victim.action_mean(clean)
+        diff = victim.action_mean(attacked) - reference
+        std = victim.action_std()
+        if std is None:
+            return (diff * diff).sum()
+        return (diff * diff / (2.0 * std * std)).sum()
+
+
+@dataclass(frozen=True, kw_only=True)
+class CriticAttack(_Attack):
+    """Drive the protagonist into what its own critic calls bad (Pattanaik et al. 2018).
+
+    With a Q critic (SAC, TD3) it minimises ``Q(s, μ(s+δ))``: the true state valued under the
+    action the perturbation induces. With a value head only (PPO) it minimises ``V(s+δ)``.
+    """
+
+    def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
+        """Minus the critic's estimate."""
+        q = victim.q_value(clean, victim.action_mean(attacked))
+        if q is not None:
+            return -q.sum()
+        return -victim.value(attacked).sum()
+
+    def check_victim(self, agent: str, victim: WhiteBox, probe: torch.Tensor) -> None:
+        """The victim must have a critic (SB3 policies do; MAPPO/IPPO actor files do not)."""
+        with_q = victim.q_value(probe, victim.action_mean(probe)) is not None
+        if not with_q and victim.value(probe) is None:
+            raise ConfigError(
+                f"CriticAttack needs a critic, but the policy of {agent!r} "
+                f"({type(victim).__name__}) has none; use MADAttack, which needs only the actor."
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class PGDAttack(_Attack):
+    """Projected gradient ascent on any differentiable objective you give.
+
+    Args:
+        objective_fn: ``(victim, clean, attacked) -> scalar tensor`` to maximise, where
+            `victim` is the protagonist's `WhiteBox` policy and `clean`/`attacked` are raw
+            observation batches ``[1, n]``. A module-level function, so the spec pickles.
+
+    Example:
+        >>> def push_first_action_up(victim, clean, attacked):
+        ...     return victim.action_mean(attacked)[0, 0]
+        >>> PGDAttack(objective_fn=push_first_action_up, steps=4).steps
+        4
+
+    """
+
+    objective_fn: Objective
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not callable(self.objective_fn):
+            raise ConfigError(
+                f"PGDAttack.objective_fn must be callable, got {self.objective_fn!r}."
+            )
+
+    def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
+        """The user's objective."""
+        return self.objective_fn(victim, clean, attacked)
+
+
+class WhiteBoxAttackPolicy:
+    """A built white-box attack: one `_Attack` spec against its disruptor's targets."""
+
+    def __init__(self, spec: _Attack, info: AgentInfo) -> None:
+        d = info.disruptor
+        if not isinstance(d, ObservationRuntime):
+            kind = None if d is None else type(d.spec).__name__
+            raise ConfigError(
+                f"{type(spec).__name__} attacks observations; {info.agent!r} controls {kind}. "
+                "Give it to an ObservationDisruptor's adversary (e.g. 'observation_adversary')."
+            )
+        if not d.bounded:
+            raise ConfigError(
+                f"{type(spec).__name__} needs a budget, but {info.agent!r}'s ObservationDisruptor "
+                "is unbounded (bounded=False, the paper's random mode); give it eps=..."
+            )
+        self.spec, self.disruptor, self.agent = spec, d, info.agent
+        self.alpha = spec.step_size if spec.step_size is not None else 2.5 / spec.steps
+        self.rng = np.random.default_rng()
+        self.game: Game | None = None
+        self.victims: dict[str, WhiteBox] = {}
+
+    def attach(self, game: Game, victims: Mapping[str, Any]) -> None:
+        """Bind to the game and the protagonist policies of the disruptor's targets."""
+        import torch
+
+        for target in self.disruptor.targets:
+            victim = victims.get(target)
+            if not isinstance(victim, WhiteBox):
+                raise ConfigError(
+                    f"{type(self.spec).__name__} on {self.agent!r} needs white-box access to "
+                    f"{target!r}'s policy, but it is {type(victim).__name__}. White-box policies: "
+                    "SB3 checkpoints (advgame.checkpoint.SB3Checkpoint/SB3Policy) and MAPPO/IPPO "
+                    "actors; a learner being trained inside a view cannot be attacked this way."
+                )
+            n = int(np.prod(self.disruptor.spaces[target].shape))
+            with torch.no_grad():
+                self.spec.check_victim(target, victim, torch.zeros((1, n)))
+            self.victims[target] = victim
+        self.game = game
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reseed the random starts."""
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+
+    def act(self, observation: Any) -> np.ndarray:
+        """Attack every target's true observation; return the adversary action ``u``."""
+        if self.game is None:
+            raise ConfigError(
+                f"{type(self.spec).__name__} was not attached to a game; play it through "
+                "advgame.rollout / evaluation (build_policies attaches it)."
+            )
+        d, out, start = self.disruptor, [], 0
+        for target in d.targets:
+            n = d.dims[target].size
+            unit = d.unit[start : start + n]
+            out.append(self._attack(target, unit))
+            start += n
+        return np.concatenate(out).astype(np.float32)
+
+    def objective_of(self, target: str, u: np.ndarray) -> float:
+        """The attack's objective at action block `u` for `target` (for tests and reports)."""
+        import torch
+
+        d = self.disruptor
+        start = sum(d.dims[t].size for t in d.targets[: d.targets.index(target)])
+        n = d.dims[target].size
+        clean, perturb = self._problem(target, d.unit[start : start + n])
+        with torch.enable_grad():  # objectives may differentiate internally (e.g. a critic's)
+            u_t = torch.as_tensor(np.asarray(u, dtype=np.float32))
+            return float(self.spec.objective(self.victims[target], clean, perturb(u_t)).detach())
+
+    def _problem(self, target: str, unit: np.ndarray) -> tuple[Any, Any]:
+        """`target`'s clean observation batch and ``u -> perturbed batch``.
+
+        The perturbed observation is clipped into the observation space, as the game clips it.
+        """
+        import torch
+
+        assert self.game is not None  # act() checked
+        space = self.disruptor.spaces[target]
+        true_obs = self.game.true_observation(target)
+        clean = torch.as_tensor(np.asarray(true_obs, dtype=np.float32).reshape(1, -1))
+        index = torch.as_tensor(self.disruptor.dims[target], dtype=torch.long)
+        scale = torch.as_tensor(unit, dtype=torch.float32)
+        low = torch.as_tensor(space.low.reshape(-1), dtype=torch.float32)
+        high = torch.as_tensor(space.high.reshape(-1), dtype=torch.float32)
+
+        def perturb(u: torch.Tensor) -> torch.Tensor:
+            delta = torch.zeros_like(clean[0]).index_add(0, index, scale * u)
+            return torch.maximum(torch.minimum(clean + delta, high), low)
+
+        return clean, perturb
+
+    def _attack(self, target: str, unit: np.ndarray) -> np.ndarray:
+        """Projected gradient ascent from random starts; the best iterate of every walk."""
+        import torch
+
+        victim, size = self.victims[target], unit.size
+        clean, perturb = self._problem(target, unit)
+        best_u, best = np.zeros(size), -np.inf
+        with torch.enable_grad():
+            for _ in range(1 + self.spec.restarts):
+                u = self._project(self.rng.uniform(-1.0, 1.0, size))
+                for step in range(self.spec.steps + 1):
+                    u_t = torch.as_tensor(u, dtype=torch.float32).requires_grad_(True)
+                    value = self.spec.objective(victim, clean, perturb(u_t))
+                    if float(value.detach()) > best:
+                        best_u, best = u, float(value.detach())
+                    if step == self.spec.steps:
+                        break
+                    (grad,) = torch.autograd.grad(value, u_t)
+                    u = self._project(u + self.alpha * self._direction(grad.numpy()))
+        return best_u
+
+    def _direction(self, grad: np.ndarray) -> np.ndarray:
+        """Steepest ascent for the ball: the gradient's sign (L∞) or its direction (L2)."""
+        if self.disruptor.norm == "linf":
+            return np.sign(grad)
+        norm = float(np.linalg.norm(grad))
+        return grad / norm if norm > 0 else grad
+
+    def _project(self, u: np.ndarray) -> np.ndarray:
+        """Onto the adversary's budget: the unit box (L∞) or the unit ball (L2)."""
+        u = np.clip(u, -1.0, 1.0)
+        if self.disruptor.norm == "l2":
+            norm = float(np.linalg.norm(u))
+            if norm > _RADIUS:  # a hair inside, so the float32 action stays in the ball
+                u = u * (_RADIUS / norm)
+        return u
