@@ -114,7 +114,8 @@ def _population(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[s
         raise ConfigError("population: needs a run directory or file, e.g. population:runs/atla.")
     preset, snaps = _snapshots(ctx, Path(arg), opts)
     its = _select(sorted(snaps), opts, ctx)
-    source = Path(arg).name if Path(arg).is_dir() else Path(arg).parent.name or Path(arg).stem
+    path = Path(arg)
+    source = path.parent.name if path.name == "population.json" else path.stem
     return {f"population {source}@{it}": _setup(preset, snaps[it]) for it in its}
 
 

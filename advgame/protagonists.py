@@ -3,8 +3,8 @@
 A protagonist of a payoff table is any policy spec: a run's final protagonist
 (`run_protagonist`), an SB3 model trained elsewhere with its observation normalizer
 (`sb3_protagonist`), a MAPPO/IPPO team file (`team_protagonist`) or a plain function.
-`check_protagonists` builds each once against the scenario's spaces, so a wrong checkpoint
-fails with both spaces named before any job runs. `cli_protagonists` reads the ``advgame
+`check_protagonists` builds each once against the scenario's spaces (and asks it for one
+action), so a wrong checkpoint or function fails with both spaces named before any job runs. `cli_protagonists` reads the ``advgame
 evaluate`` options into the same specs.
 """
 
@@ -14,6 +14,9 @@ import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+from gymnasium import spaces
 
 from advgame.checkpoint import ALGOS, SB3Checkpoint
 from advgame.errors import ConfigError, did_you_mean
@@ -127,15 +130,29 @@ def check_protagonists(scenario: str, protagonists: Mapping[str, Any]) -> dict[s
     game = make(scenario, disruptors={})
     built = {}
     try:
+        game.reset(seed=0)
         for name, spec in protagonists.items():
             specs = spec if isinstance(spec, Mapping) else dict.fromkeys(game.protagonists, spec)
             try:
                 built[name] = build_policies(game, specs)
+                for agent in game.protagonists:
+                    _check_action(game, agent, built[name][agent].act(game.observe(agent)))
             except ConfigError as exc:
                 raise type(exc)(f"Protagonist {name!r} on {scenario}: {exc}") from None
     finally:
         game.close()
     return built
+
+
+def _check_action(game: Any, agent: str, action: Any) -> None:
+    """A Box action of the wrong shape fails here, not deep inside the simulator."""
+    space = game.action_space(agent)
+    shape = np.shape(action)
+    if isinstance(space, spaces.Box) and shape != space.shape:
+        raise ConfigError(
+            f"it answers the first observation of {agent!r} with an action of shape {shape}, "
+            f"but {agent!r} acts in {space}."
+        )
 
 
 def _named(items: Sequence[str], option: str, form: str) -> dict[str, str]:

@@ -21,6 +21,7 @@ from advgame.evaluation import (
     check_protagonists,
     sb3_protagonist,
 )
+from advgame.population import Population
 
 TINY_ATLA = [
     "--scenario",
@@ -206,6 +207,21 @@ def test_default_columns_are_todays(atla_run: Path) -> None:
         ].specs["observation_adversary"]
     )
     assert isinstance(columns["nominal"], AdversarySetup)
+    other = adversary_columns("Hopper-v5", ["nominal", f"learned:{atla_run}"])
+    assert list(other) == ["nominal", "learned (atla)"]
+    assert other["learned (atla)"] == columns["learned (atla)"]
+
+
+def test_a_population_file_outside_a_run_needs_its_preset(atla_run: Path, tmp_path: Path) -> None:
+    Population.load(atla_run / "population.json").save(tmp_path / "attackers.json")
+    spec = f"population:{tmp_path / 'attackers.json'}"
+    with pytest.raises(ConfigError, match="preset=atla"):
+        adversary_columns("Hopper-v5", [spec])
+    columns = adversary_columns("Hopper-v5", [f"{spec},preset=atla,last=2"])
+    assert list(columns) == ["nominal", "population attackers@1", "population attackers@2"]
+    assert all(
+        Path(c.specs["observation_adversary"].path).is_file() for c in columns.values() if c.specs
+    )
 
 
 def test_a_population_and_a_preset_from_the_cli_then_a_moved_folder_re_reports(
@@ -239,3 +255,33 @@ def test_a_population_and_a_preset_from_the_cli_then_a_moved_folder_re_reports(
     assert (moved / "training.png").read_bytes()[:4] == b"\x89PNG"
     runs = json.loads((moved / "runs.json").read_text())
     assert not Path(runs["atla"]["progress"]).is_absolute()
+
+
+def test_a_team_checkpoint_plays_as_its_run_does(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    args = ["train", "--scenario", "MA-HalfCheetah-2x3", "--preset", "partial"]
+    args += ["--iterations", "1", "--protagonist-steps", "128", "--adversary-steps", "128"]
+    args += ["--set", 'protagonist_algo="mappo"', "--set", 'protagonist_hparams={"n_steps": 64}']
+    args += ["--set", 'adversary_hparams={"n_steps": 64}', "--no-progress", "--run-dir", "ma"]
+    assert main(args) == 0
+    actors = next(Path("ma").glob("checkpoints/iter_*/mappo_actors.pt"))
+    args = ["evaluate", "ma", "--team", f"copy={actors}", "--out", "res", "--seeds", "2"]
+    assert main([*args, "--adversaries", "nominal", "learned", "--budgets", "--workers", "1"]) == 0
+    table = rows(Path("res"))
+    assert {r["adversary"] for r in table} == {"nominal", "learned (ma)"}
+    by = {(r["protagonist"], r["adversary"], r["seed"]): float(r["true_return"]) for r in table}
+    assert len(by) == 8
+    assert all(by[("copy", a, s)] == by[("ma", a, s)] for _, a, s in by)
+    assert by[("ma", "nominal", "0")] != by[("ma", "nominal", "1")]
+
+
+def test_a_callable_of_the_wrong_action_shape_is_refused_before_it_plays(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["evaluate", "--scenario", "Hopper-v5", "--out", str(tmp_path / "r")]
+    assert main([*args, "--callable", "zeros=numpy:zeros_like", "--adversaries", "nominal"]) == 2
+    err = capsys.readouterr().err
+    assert "'zeros'" in err and "shape (11,)" in err and "(3,)" in err
+    assert not (tmp_path / "r").exists()
