@@ -55,18 +55,22 @@ class Normalizer:
     """Added to the variance before its square root."""
 
 
-@functools.lru_cache(maxsize=64)
 def load_normalizer(path: str) -> Normalizer | None:
     """Read a normalizer: an ``.npz`` (``mean``, ``var``) or a `VecNormalize` pickle.
 
-    Returns None for a `VecNormalize` saved with ``norm_obs=False`` (raw observations). Only
-    load pickles you trust: unpickling runs code.
+    Returns None for a `VecNormalize` saved with ``norm_obs=False`` (raw observations). Cached
+    per process and file version. Only load pickles you trust: unpickling runs code.
     """
     if not Path(path).is_file():
         raise ConfigError(
             f"No normalizer file at {path!r}; give the `VecNormalize.save` pickle or the "
             "``*_obs_norm.npz`` saved beside the model."
         )
+    return _read_normalizer(path, Path(path).stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _read_normalizer(path: str, mtime_ns: int) -> Normalizer | None:
     if path.endswith(".npz"):
         with np.load(path) as stats:
             if "mean" not in stats or "var" not in stats:

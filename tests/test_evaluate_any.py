@@ -106,7 +106,7 @@ def test_a_plain_sb3_model_plays_the_nominal_episodes_plain_sb3_plays(
     args = ["evaluate", "--scenario", "Hopper-v5", "--out", "results", "--seeds", "2"]
     args += ["--checkpoint", f"mine={plain_sb3 / 'model.zip'}:ppo"]
     args += ["--normalizer", f"mine={plain_sb3 / 'vecnormalize.pkl'}"]
-    args += ["--adversaries", "nominal", "--budgets", "--workers", "1"]
+    args += ["--adversaries", "nominal", "--budgets", "--workers", "2"]
     assert main(args) == 0
     got = {int(r["seed"]): float(r["true_return"]) for r in rows(tmp_path / "results")}
     assert {r["adversary"] for r in rows(tmp_path / "results")} == {"nominal"}
