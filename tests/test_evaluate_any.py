@@ -285,3 +285,25 @@ def test_a_callable_of_the_wrong_action_shape_is_refused_before_it_plays(
     err = capsys.readouterr().err
     assert "'zeros'" in err and "shape (11,)" in err and "(3,)" in err
     assert not (tmp_path / "r").exists()
+
+
+def test_evaluate_help_lists_the_column_kinds(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for kind in ("preset:NAME", "population:RUN_DIR|FILE", "learned[:RUN_DIR]", "--raw-obs"):
+        assert kind in text
+
+
+def test_a_folder_with_an_old_runs_json_still_finds_the_curves(
+    atla_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    args = ["evaluate", str(atla_run), "--out", "res", "--seeds", "1", "--workers", "1"]
+    assert main([*args, "--adversaries", "nominal", "--budgets"]) == 0
+    (tmp_path / "res" / "runs.json").write_text(json.dumps({"atla": str(atla_run)}))
+    shutil.rmtree(tmp_path / "res" / "progress")
+    (tmp_path / "res" / "training.png").unlink()
+    assert main(["report", "res"]) == 0
+    assert (tmp_path / "res" / "training.png").is_file()
+    assert f"run `{atla_run}`" in (tmp_path / "res" / "report.md").read_text()
