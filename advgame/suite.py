@@ -167,7 +167,7 @@ def _runs_md(runs: Mapping[str, Mapping[str, str]]) -> str:
         + (f", training curves from [{e['progress']}]({e['progress']})" if "progress" in e else "")
         for n, e in runs.items()
     ]
-    note = "Run paths are relative to this folder (absolute when it was written from elsewhere)."
+    note = "Run paths are relative to this folder; training curves link to copies in it."
     return "\n".join(lines) + "\n\n" + note if lines else "none"
 
 
@@ -263,9 +263,8 @@ def report_folder(folder: Path, scenario: str | None = None) -> Path:
             PayoffTable.from_csv(folder / "budget.csv"), folder / "budget.png"
         )
     runs = _read_runs(folder)
-    curves = plot_training_curves(
-        {n: _progress_path(folder, e) for n, e in runs.items()}, folder / "training.png"
-    )
+    csvs = {n: _progress_path(folder, e) for n, e in runs.items()}
+    curves = plot_training_curves(csvs, folder / "training.png") if csvs else None
     if curves is not None:
         figures["training curves"] = curves
     sections = {"Runs": _runs_md(runs)}
