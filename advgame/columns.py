@@ -62,6 +62,8 @@ class ColumnContext:
     """Default ``sample=K`` of population columns."""
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     """Draws the snapshots of ``sample=K``."""
+    protagonists: Mapping[str, Any] = field(default_factory=dict)
+    """The evaluated protagonists' specs, ``{name: spec}`` (for kinds that attack them)."""
 
 
 Kind = Callable[[ColumnContext, str, Mapping[str, str]], dict[str, AdversarySetup]]
@@ -229,11 +231,13 @@ def adversary_columns(
     last: int | None = None,
     sample: int | None = None,
     seed: int = 0,
+    protagonists: Mapping[str, Any] | None = None,
 ) -> dict[str, AdversarySetup]:
     """The adversary columns `specs` name, ``nominal`` first (see the module doc for kinds).
 
     `runs` are the evaluated runs (``learned`` and ``default`` use them); `last` and `sample`
-    are the defaults of population columns that set neither; `seed` draws ``sample=K``.
+    are the defaults of population columns that set neither; `seed` draws ``sample=K``;
+    `protagonists` (``{name: spec}``) are passed on to kinds that need them.
     """
     if isinstance(specs, str):
         specs = [specs]
@@ -243,6 +247,7 @@ def adversary_columns(
         _count({"last": str(last)}, "last", None) if last is not None else None,
         _count({"sample": str(sample)}, "sample", None) if sample is not None else None,
         np.random.default_rng(seed),
+        dict(protagonists or {}),
     )
     cols: dict[str, AdversarySetup] = {NOMINAL: AdversarySetup.nominal()}
     for spec in specs:

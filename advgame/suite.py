@@ -95,7 +95,13 @@ def evaluate_policies(
         columns = {NOMINAL: AdversarySetup.nominal(), **adversaries}
     else:
         columns = adversary_columns(
-            scenario, adversaries, runs=run_dirs, last=last, sample=sample, seed=seed
+            scenario,
+            adversaries,
+            runs=run_dirs,
+            last=last,
+            sample=sample,
+            seed=seed,
+            protagonists=protagonists,
         )
     seed_list = tuple(range(seeds))
     jobs = population_jobs(scenario, protagonists, columns, seeds=seed_list, episodes=episodes)
