@@ -1,8 +1,10 @@
 """Stable-Baselines3 checkpoints as policies: what populations store and evaluation loads.
 
 A checkpoint is a ``.zip`` saved by an SB3 model plus, optionally, the observation normalizer
-(mean and variance) the policy was trained behind. `SB3Checkpoint` is the picklable spec that
-rebuilds it as a `Policy` in any process; `SB3Policy` is that policy.
+the policy was trained behind: the project's ``*_obs_norm.npz`` (``mean`` and ``var``) or a
+`VecNormalize` pickle saved by plain SB3 (``VecNormalize.save``), read by `load_normalizer`.
+`SB3Checkpoint` is the picklable spec that rebuilds it as a `Policy` in any process;
+`SB3Policy` is that policy.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 from advgame.errors import ConfigError
 from advgame.policy import AgentInfo
 
-__all__ = ["ALGOS", "SB3Checkpoint", "SB3Policy", "load_model"]
+__all__ = ["ALGOS", "Normalizer", "SB3Checkpoint", "SB3Policy", "load_model", "load_normalizer"]
 
 ALGOS = ("ppo", "sac", "td3")
 
@@ -37,6 +39,68 @@ def load_model(path: str, algo: str) -> Any:
     if not Path(path).exists():
         raise ConfigError(f"No checkpoint at {path!r}.")
     return _algo_class(algo).load(path, device="cpu")
+
+
+@dataclass(frozen=True)
+class Normalizer:
+    """Frozen observation-normalizer statistics, as SB3's `VecNormalize` applies them."""
+
+    mean: np.ndarray
+    """Running mean of the raw observations."""
+    var: np.ndarray
+    """Running variance of the raw observations."""
+    clip_obs: float = 10.0
+    """Normalized observations are clipped to ``[-clip_obs, clip_obs]``."""
+    epsilon: float = 1e-8
+    """Added to the variance before its square root."""
+
+
+def load_normalizer(path: str) -> Normalizer | None:
+    """Read a normalizer: an ``.npz`` (``mean``, ``var``) or a `VecNormalize` pickle.
+
+    Returns None for a `VecNormalize` saved with ``norm_obs=False`` (raw observations). Cached
+    per process and file version. Only load pickles you trust: unpickling runs code.
+    """
+    if not Path(path).is_file():
+        raise ConfigError(
+            f"No normalizer file at {path!r}; give the `VecNormalize.save` pickle or the "
+            "``*_obs_norm.npz`` saved beside the model."
+        )
+    return _read_normalizer(path, Path(path).stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _read_normalizer(path: str, mtime_ns: int) -> Normalizer | None:
+    if path.endswith(".npz"):
+        with np.load(path) as stats:
+            if "mean" not in stats or "var" not in stats:
+                raise ConfigError(f"{path} holds {list(stats)}; expected 'mean' and 'var'.")
+            return Normalizer(stats["mean"], stats["var"])
+    return _vecnormalize_stats(path)
+
+
+def _vecnormalize_stats(path: str) -> Normalizer | None:
+    import pickle
+
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+    try:
+        with open(path, "rb") as f:
+            norm = pickle.load(f)
+    except Exception as exc:
+        raise ConfigError(
+            f"Cannot read the normalizer {path} ({type(exc).__name__}: {exc}); expected a "
+            "VecNormalize pickle (`VecNormalize.save`) or an .npz with 'mean' and 'var'."
+        ) from None
+    rms = getattr(norm, "obs_rms", None)
+    if not isinstance(rms, RunningMeanStd):
+        raise ConfigError(
+            f"{path} holds {type(norm).__name__} with obs_rms {type(rms).__name__}; expected a "
+            "VecNormalize of a Box observation space (Dict observations are not supported)."
+        )
+    if not getattr(norm, "norm_obs", True):
+        return None
+    return Normalizer(rms.mean, rms.var, float(norm.clip_obs), float(norm.epsilon))
 
 
 class SB3Policy:
@@ -85,13 +149,15 @@ class SB3Policy:
             torch.manual_seed(seed)
 
     def act(self, observation: Any) -> Any:
-        """The policy's action for one raw observation."""
-        obs = np.asarray(observation, dtype=np.float32)
+        """The policy's action for one raw observation.
+
+        Normalized in the observation's own precision, then cast to float32, exactly as
+        `VecNormalize.normalize_obs` and SB3's ``predict`` do.
+        """
+        obs = np.asarray(observation)
         if self.mean is not None and self.std is not None:
-            obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs).astype(
-                np.float32
-            )
-        return self._predict(obs)
+            obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs)
+        return self._predict(obs.astype(np.float32, copy=False))
 
     def _predict(self, obs: np.ndarray) -> Any:
         """SB3's ``predict`` for one flat observation, without its batching and checks.
@@ -180,7 +246,8 @@ class SB3Checkpoint:
     algo: str = "ppo"
     """``"ppo"``, ``"sac"`` or ``"td3"``."""
     normalizer: str | None = None
-    """An ``.npz`` with ``mean`` and ``var`` of the observation normalizer, if any."""
+    """The observation normalizer, if any: an ``.npz`` with ``mean`` and ``var`` or a
+    `VecNormalize` pickle (see `load_normalizer`)."""
     deterministic: bool = True
     """Act with the mode of the action distribution."""
 
@@ -189,15 +256,24 @@ class SB3Checkpoint:
             raise ConfigError(f"SB3Checkpoint.algo must be one of {ALGOS}, got {self.algo!r}.")
 
     def build(self, info: AgentInfo) -> SB3Policy:
-        """Load the model (cached per process) and check it fits `info`'s spaces."""
+        """Load the model and normalizer (cached per process); check they fit `info`'s spaces."""
         model = load_model(str(self.path), self.algo)
-        if model.observation_space.shape != info.observation_space.shape:
+        for what in ("observation", "action"):
+            have, want = getattr(model, f"{what}_space"), getattr(info, f"{what}_space")
+            if have.shape != want.shape or type(have) is not type(want):
+                raise ConfigError(
+                    f"Checkpoint {self.path} has {what} space {have}, but {info.agent!r} has "
+                    f"{want}; evaluate it on a scenario with the spaces it was trained on."
+                )
+        norm = load_normalizer(str(self.normalizer)) if self.normalizer is not None else None
+        if norm is None:
+            return SB3Policy(model, deterministic=self.deterministic)
+        if norm.mean.shape != info.observation_space.shape:
             raise ConfigError(
-                f"Checkpoint {self.path} observes shape {model.observation_space.shape}, but "
-                f"{info.agent!r} observes {info.observation_space.shape}."
+                f"The normalizer {self.normalizer} has shape {norm.mean.shape}, but "
+                f"{info.agent!r} observes {info.observation_space.shape}; give the normalizer "
+                f"saved with {self.path}."
             )
-        mean = var = None
-        if self.normalizer is not None:
-            stats = np.load(self.normalizer)
-            mean, var = stats["mean"], stats["var"]
-        return SB3Policy(model, mean, var, deterministic=self.deterministic)
+        return SB3Policy(
+            model, norm.mean, norm.var, self.deterministic, norm.clip_obs, norm.epsilon
+        )

@@ -24,6 +24,9 @@ EPILOG = """examples:
   advgame train --config runs/atla/config.json --set iterations=20 --run-dir runs/atla20
   advgame resume runs/atla
   advgame evaluate runs/ppo runs/atla --out results/hopper --seeds 3
+  advgame evaluate --scenario Hopper-v5 --checkpoint mine=model.zip:ppo \
+      --normalizer mine=vecnormalize.pkl \
+      --adversaries preset:state-gauss-0.1 population:runs/atla --last 5 --out results/mine
   advgame report results/hopper
   advgame demo
 """
@@ -78,7 +81,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from advgame.suite import evaluate_runs
+    from advgame.suite import BUDGETS, evaluate_runs
 
     out = evaluate_runs(
         args.runs,
@@ -89,6 +92,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         exploitability_steps=args.exploitability,
         checkpoints=args.checkpoint or [],
         callables=args.callable or [],
+        scenario=args.scenario,
+        normalizers=args.normalizer or [],
+        raw_obs=args.raw_obs or [],
+        teams=args.team or [],
+        adversaries=args.adversaries or ["default"],
+        last=args.last,
+        sample=args.sample,
+        seed=args.seed,
+        budgets=BUDGETS if args.budgets is None else args.budgets,
     )
     print(f"report: {out}")
     return 0
@@ -106,6 +118,50 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     print(f"report: {demo(Path(args.out), quick=args.quick, workers=args.workers)}")
     return 0
+
+
+_COLUMN_HELP = (
+    "nominal",
+    "preset:NAME",
+    "random (the paper's random presets)",
+    "scheduled",
+    "learned[:RUN_DIR] (latest learned snapshot; no RUN_DIR: of every evaluated run)",
+    "population:RUN_DIR|FILE[,last=K|,sample=K][,preset=NAME] (one column per snapshot)",
+    "default = nominal random scheduled learned",
+)
+
+
+def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
+    """Who is evaluated, and against whom (see `advgame.suite.evaluate_runs`)."""
+    p.add_argument(
+        "runs", nargs="*", help="run directories whose final protagonists join the evaluation"
+    )
+    p.add_argument("--scenario", help="the scenario to play (default: the runs' scenario)")
+    for flag, metavar, text in (
+        ("--checkpoint", "NAME=PATH[:ALGO]", "an SB3 model (ppo, sac, td3) as a protagonist"),
+        ("--normalizer", "NAME=PATH", "its VecNormalize pickle or obs-norm .npz"),
+        ("--raw-obs", "NAME", "checkpoint NAME was trained on raw observations (no normalizer)"),
+        ("--callable", "NAME=MODULE:FUNCTION", "a plain function obs -> action as a protagonist"),
+        ("--team", "NAME=PATH", "a MAPPO/IPPO <algo>_actors.pt as a protagonist team"),
+    ):
+        p.add_argument(flag, action="append", metavar=metavar, help=f"{text} (repeatable)")
+    p.add_argument(
+        "--adversaries",
+        nargs="+",
+        metavar="SPEC",
+        help="adversary columns (default: 'default'); nominal is always played",
+    )
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--last", type=int, metavar="K", help="population columns: last K only")
+    group.add_argument("--sample", type=int, metavar="K", help="population columns: K drawn")
+    p.add_argument("--seed", type=int, default=0, help="seed of --sample (default 0)")
+    p.add_argument(
+        "--budgets",
+        nargs="*",
+        type=float,
+        metavar="SIGMA",
+        help="state-noise σ of the budget sweep (default 0 0.05 0.1 0.15; none: no sweep)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -164,26 +220,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_resume)
 
     p = sub.add_parser(
-        "evaluate", help="evaluate trained protagonists against an adversary population"
+        "evaluate",
+        help="evaluate fixed policies against chosen adversary columns",
+        description="Play every protagonist against every adversary column (payoff table, "
+        "metrics, budget sweep, report). Adversary column specs: " + "; ".join(_COLUMN_HELP),
     )
-    p.add_argument(
-        "runs",
-        nargs="*",
-        help="run directories whose final protagonists (and learned "
-        "adversaries) join the evaluation",
-    )
-    p.add_argument(
-        "--checkpoint",
-        action="append",
-        metavar="NAME=PATH[:ALGO]",
-        help="also evaluate an SB3 checkpoint as a protagonist",
-    )
-    p.add_argument(
-        "--callable",
-        action="append",
-        metavar="NAME=MODULE:FUNCTION",
-        help="also evaluate a plain function obs -> action as a protagonist",
-    )
+    _evaluate_arguments(p)
     p.add_argument("--out", required=True, help="output folder (CSV, JSON, plots, report.md)")
     p.add_argument("--seeds", type=int, default=3, help="evaluation seeds per cell (default 3)")
     p.add_argument("--episodes", type=int, default=1, help="episodes per seed (default 1)")

@@ -11,8 +11,19 @@ the *true* return: nominal, mean, worst case, CVaR and the degradation from nomi
     jobs = population_jobs("Hopper-v5", {"mine": my_policy}, setups, seeds=(0, 1))
     evaluate(jobs, workers=2).metrics(alpha=0.1)
 
-Jobs and their builders live in `advgame.jobs`, tables and metrics in `advgame.payoff`; this
-module re-exports both, so ``from advgame.evaluation import ...`` reaches all of them.
+Who is evaluated and against whom, for fixed policies from anywhere: `sb3_protagonist` (an SB3
+model trained elsewhere, behind its `VecNormalize` statistics), `team_protagonist`,
+`run_protagonist`, `check_protagonists`; `adversary_columns` turns column specs
+(``preset:NAME``, ``population:RUN_DIR``, ...) into `AdversarySetup`s; `evaluate_policies` does
+all of it and writes a self-contained results folder with its report::
+
+    mine = sb3_protagonist("model.zip", normalizer="vecnormalize.pkl")
+    cols = adversary_columns("Hopper-v5", ["preset:state-gauss-0.1", "population:runs/atla"])
+    evaluate_policies("Hopper-v5", {"mine": mine}, "results", adversaries=cols)
+
+Jobs and their builders live in `advgame.jobs`, tables and metrics in `advgame.payoff`,
+protagonists in `advgame.protagonists`, columns in `advgame.columns`; this module re-exports
+them, so ``from advgame.evaluation import ...`` reaches all of them.
 """
 
 from __future__ import annotations
@@ -28,6 +39,7 @@ from collections.abc import Iterable, Iterator, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
+from advgame.columns import COLUMN_KINDS, adversary_columns, describe_column
 from advgame.errors import ConfigError
 from advgame.jobs import (
     SEED_STRIDE,
@@ -46,26 +58,50 @@ from advgame.payoff import (
     degradation,
     worst_case,
 )
+from advgame.protagonists import (
+    check_protagonists,
+    run_protagonist,
+    sb3_protagonist,
+    team_protagonist,
+)
 
 __all__ = [
     "COLUMNS",
+    "COLUMN_KINDS",
     "NOMINAL",
     "SEED_STRIDE",
     "AdversarySetup",
     "EvalJob",
     "PayoffTable",
+    "adversary_columns",
     "budget_sweep",
+    "check_protagonists",
     "ci95",
     "cvar",
     "degradation",
+    "describe_column",
     "evaluate",
+    "evaluate_policies",  # noqa: F822 - lazily from advgame.suite (module __getattr__): no cycle
     "population_jobs",
     "run_job",
+    "run_protagonist",
+    "sb3_protagonist",
     "shift_grid",
+    "team_protagonist",
     "worst_case",
 ]
 
 log = logging.getLogger(__name__)
+
+
+def __getattr__(name: str) -> Any:
+    """`evaluate_policies` lives in `advgame.suite` (it writes reports), loaded on first use."""
+    if name == "evaluate_policies":
+        from advgame.suite import evaluate_policies
+
+        return evaluate_policies
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 _PRELOAD = ("advgame.evaluation", "advgame.episodes", "advgame.scenarios.mujoco", "mujoco")
 

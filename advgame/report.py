@@ -22,7 +22,13 @@ import numpy as np
 from advgame.errors import ConfigError
 from advgame.evaluation import NOMINAL, PayoffTable, ci95
 
-__all__ = ["plot_budget_curve", "plot_heatmap", "plot_training_curves", "write_report"]
+__all__ = [
+    "adversary_listing",
+    "plot_budget_curve",
+    "plot_heatmap",
+    "plot_training_curves",
+    "write_report",
+]
 
 log = logging.getLogger(__name__)
 
@@ -254,6 +260,22 @@ def write_report(
     path.write_text("\n\n".join(parts) + "\n")
     log.info("wrote %s", path)
     return path
+
+
+def adversary_listing(columns: Mapping[str, Mapping[str, Any]]) -> str:
+    """Markdown: which adversaries formed each column (from `advgame.columns.describe_column`)."""
+    lines = [
+        "Each column of the payoff matrix: how its game was made and who played which adversary."
+    ]
+    for name, desc in columns.items():
+        game = ", ".join(f"{k}={v!r}" for k, v in dict(desc.get("game", {})).items()) or "default"
+        lines += ["", f"- **{_fmt(name)}** ({game})"]
+        advs = desc.get("adversaries", {})
+        if isinstance(advs, Mapping):
+            lines += [f"  - `{agent}`: `{spec}`" for agent, spec in advs.items()]
+        else:
+            lines.append(f"  - {advs}")
+    return "\n".join(lines)
 
 
 def _cell(c: Mapping[str, Any] | None) -> str:

@@ -1,9 +1,11 @@
-"""Ready-made workflows: evaluate trained runs against an adversary population, and the demo.
+"""Ready-made workflows: evaluate fixed policies against chosen adversaries, and the demo.
 
-`evaluate_runs` is what ``advgame evaluate`` runs: the final protagonist of each run (plus any
-checkpoints or plain functions) against the nominal task, the paper's random attacks, a
-scheduled shift, and every run's learned adversaries, with a budget sweep, training curves,
-optional exploitability, and a Markdown report. `demo` trains PPO and ATLA-PPO briefly on
+`evaluate_policies` plays any protagonists (run finals, SB3 models trained elsewhere, teams,
+callables) against adversary columns named by specs (`advgame.columns`: by default the nominal
+task, the paper's random attacks, a scheduled shift and every run's latest learned
+adversaries), with a budget sweep, and writes a results folder that stands on its own (run
+paths relative to it, training curves copied in) with a Markdown report. `evaluate_runs` is
+what ``advgame evaluate`` runs on top of it; `demo` trains PPO and ATLA-PPO briefly on
 Hopper-v5 and evaluates them the same way.
 """
 
@@ -11,101 +13,168 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Sequence
+import os
+import shutil
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from advgame.checkpoint import SB3Checkpoint
-from advgame.config import load_json
+from advgame.columns import RANDOM, SCHEDULED, adversary_columns, describe_column
 from advgame.errors import ConfigError
-from advgame.evaluation import AdversarySetup, PayoffTable, budget_sweep, evaluate, population_jobs
-from advgame.population import Population
-from advgame.registry import load, make, scenario_spec
-from advgame.training import TEAM_ALGOS, TrainConfig
+from advgame.evaluation import (
+    NOMINAL,
+    AdversarySetup,
+    PayoffTable,
+    budget_sweep,
+    evaluate,
+    population_jobs,
+)
+from advgame.protagonists import check_protagonists, cli_protagonists, run_protagonist
+from advgame.training import TrainConfig
 
-__all__ = ["BUDGETS", "demo", "evaluate_runs", "report_folder", "run_protagonist"]
+__all__ = [
+    "BUDGETS",
+    "RANDOM",
+    "SCHEDULED",
+    "demo",
+    "evaluate_policies",
+    "evaluate_runs",
+    "report_folder",
+    "run_protagonist",
+]
 
 log = logging.getLogger(__name__)
-
-_ACTOR_SPEC = "advgame.agents.marl_nets:TorchActorCheckpoint"
-
-RANDOM = ("state-gauss-0.1", "state-gauss-0.15", "state-uniform-0.2-0.8", "action-gauss-0.1")
-"""Random-mode presets evaluated when the scenario has them (the paper's settings)."""
-SCHEDULED = ("shift-sinusoid", "state-gauss-0.1-100F")
-"""The first of these the scenario has is its scheduled column."""
 SCHEDULE_EPISODES = 8
 """Consecutive episodes per seed in the scheduled column (the sinusoid advances per episode)."""
 BUDGETS = (0.0, 0.05, 0.1, 0.15)
 """Gaussian state-noise σ of the return-vs-budget sweep (the paper's Fig. 3 levels and more)."""
 
 
-def run_protagonist(run_dir: Path) -> tuple[TrainConfig, Any]:
-    """A finished (or interrupted) run's config and its last protagonist(s) as a policy spec.
+def evaluate_policies(
+    scenario: str,
+    protagonists: Mapping[str, Any],
+    out: str | Path,
+    *,
+    adversaries: Sequence[str] | Mapping[str, AdversarySetup] = ("default",),
+    runs: Mapping[str, str | Path] | None = None,
+    last: int | None = None,
+    sample: int | None = None,
+    seed: int = 0,
+    seeds: int = 3,
+    episodes: int = 1,
+    workers: int = 2,
+    budgets: Sequence[float] = BUDGETS,
+    progress: bool = True,
+) -> Path:
+    """Evaluate fixed policies against chosen adversary columns; write the folder, return ``report.md``.
 
-    Team runs (MAPPO/IPPO) give ``{protagonist id: spec}``, one actor per protagonist.
+    Args:
+        scenario: the registered scenario every cell plays.
+        protagonists: ``{name: spec}`` (`sb3_protagonist`, `team_protagonist`, a callable...).
+        out: the results folder (``payoff.csv``, ``columns.json``, ``runs.json``, plots, report).
+        adversaries: column specs (`advgame.columns.adversary_columns`) or ready setups.
+        runs: ``{name: run directory}`` whose training curves (and, for ``learned``/``default``,
+            adversaries) join the report; their progress CSVs are copied into `out`.
+        last: keep the last K snapshots of population columns that do not say otherwise.
+        sample: or K snapshots drawn from each (with `seed`).
+        seed: seeds the drawing of ``sample``.
+        seeds: evaluation seeds per cell (0 .. seeds-1).
+        episodes: episodes per seed.
+        workers: evaluation processes.
+        budgets: σ levels of the state-noise sweep (empty: no sweep).
+        progress: show progress bars.
+
     """
-    state_path = run_dir / "state.json"
-    if not state_path.exists():
-        raise ConfigError(
-            f"{run_dir} has no finished iteration (no state.json); train or resume it."
+    out = Path(out)
+    run_dirs = {n: Path(d) for n, d in (runs or {}).items()}
+    if not protagonists:
+        raise ConfigError("Nothing to evaluate: give run directories, checkpoints or callables.")
+    check_protagonists(scenario, protagonists)
+    if isinstance(adversaries, Mapping):
+        columns = {NOMINAL: AdversarySetup.nominal(), **adversaries}
+    else:
+        columns = adversary_columns(
+            scenario,
+            adversaries,
+            runs=run_dirs,
+            last=last,
+            sample=sample,
+            seed=seed,
+            protagonists=protagonists,
         )
-    cfg = load_json(TrainConfig, run_dir / "config.json")
-    folder = run_dir / json.loads(state_path.read_text())["checkpoint"]
-    if cfg.protagonist_algo in TEAM_ALGOS:
-        actor = load(_ACTOR_SPEC)
-        path = str(folder / f"{cfg.protagonist_algo}_actors.pt")
-        protagonists = make(cfg.scenario, preset=cfg.preset).protagonists
-        return cfg, {p: actor(path, p, deterministic=True) for p in protagonists}
-    norm = folder / "protagonist_obs_norm.npz"
-    spec = SB3Checkpoint(
-        str(folder / "protagonist.zip"),
-        cfg.protagonist_algo,
-        str(norm) if norm.exists() else None,
-        deterministic=True,
-    )
-    return cfg, spec
+    seed_list = tuple(range(seeds))
+    jobs = population_jobs(scenario, protagonists, columns, seeds=seed_list, episodes=episodes)
+    # A per-episode schedule needs several consecutive episodes per seed to move at all.
+    jobs = [
+        replace(j, episodes=max(episodes, SCHEDULE_EPISODES))
+        if j.adversary.startswith("scheduled")
+        else j
+        for j in jobs
+    ]
+    table = evaluate(jobs, workers=workers, progress=progress)
+    out.mkdir(parents=True, exist_ok=True)
+    table.to_csv(out / "payoff.csv")
+    if budgets:
+        sweep = budget_sweep(scenario, protagonists, budgets, seeds=seed_list, episodes=episodes)
+        evaluate(sweep, workers=workers, progress=progress).to_csv(out / "budget.csv")
+    else:
+        (out / "budget.csv").unlink(missing_ok=True)
+    columns_json = {n: describe_column(s) for n, s in columns.items()}
+    (out / "columns.json").write_text(json.dumps(columns_json, indent=2, default=str) + "\n")
+    _write_runs(out, run_dirs)
+    return report_folder(out, scenario=scenario)
 
 
-def _adversary_columns(
-    scenario: str, runs: dict[str, tuple[TrainConfig, Path]]
-) -> dict[str, AdversarySetup]:
-    presets = scenario_spec(scenario).load_presets()
-    cols: dict[str, AdversarySetup] = {"nominal": AdversarySetup.nominal()}
-    for name in RANDOM:
-        if name in presets:
-            cols[f"random {name}"] = AdversarySetup.from_preset(scenario, name)
-    for name in SCHEDULED:
-        if name in presets:
-            cols[f"scheduled {name}"] = AdversarySetup.from_preset(scenario, name)
-            break
-    for run, (cfg, run_dir) in runs.items():
-        pop = (
-            Population.load(run_dir / "population.json")
-            if (run_dir / "population.json").exists()
-            else Population()
-        )
-        learned = {m.agent: m for m in pop if m.learned}  # the latest snapshot of each agent
-        if learned:
-            specs = {a: replace(m.spec, deterministic=True) for a, m in learned.items()}
-            cols[f"learned ({run})"] = AdversarySetup({"preset": cfg.preset}, specs)
-    return cols
+def _write_runs(out: Path, runs: Mapping[str, Path]) -> None:
+    """``runs.json``: each run's path relative to `out`, its progress CSV copied into `out`."""
+    entries = {}
+    for name, run_dir in runs.items():
+        entry = {"path": _relpath(run_dir, out)}
+        if (run_dir / "progress.csv").is_file():
+            copy = out / "progress" / f"{name}.csv"
+            copy.parent.mkdir(exist_ok=True)
+            shutil.copyfile(run_dir / "progress.csv", copy)
+            entry["progress"] = copy.relative_to(out).as_posix()
+        entries[name] = entry
+    (out / "runs.json").write_text(json.dumps(entries, indent=2) + "\n")
 
 
-def _extra_protagonists(checkpoints: Sequence[str], callables: Sequence[str]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for item in checkpoints:
-        name, _, rest = item.partition("=")
-        path, _, algo = rest.partition(":")
-        if not name or not path:
-            raise ConfigError(f"--checkpoint takes NAME=PATH[:ALGO], got {item!r}.")
-        out[name] = SB3Checkpoint(path, algo or "ppo", deterministic=True)
-    for item in callables:
-        name, _, target = item.partition("=")
-        if not name or ":" not in target:
-            raise ConfigError(f"--callable takes NAME=MODULE:FUNCTION, got {item!r}.")
-        out[name] = load(target)
-    return out
+def _relpath(path: Path, start: Path) -> str:
+    try:
+        return Path(os.path.relpath(path.resolve(), start.resolve())).as_posix()
+    except ValueError:  # another drive (Windows)
+        return path.resolve().as_posix()
+
+
+def _read_runs(folder: Path) -> dict[str, dict[str, str]]:
+    """``runs.json`` of `folder`; old files (``{name: path}``, relative to the cwd) as well."""
+    path = folder / "runs.json"
+    runs = json.loads(path.read_text()) if path.exists() else {}
+    return {n: {"path": e} if isinstance(e, str) else dict(e) for n, e in runs.items()}
+
+
+def _progress_path(folder: Path, entry: Mapping[str, str]) -> Path:
+    """A run's progress CSV: the copy in `folder`, else the run's own.
+
+    The run's path is tried relative to `folder`, then to the current directory (as folders
+    written before copies stored it).
+    """
+    if entry.get("progress") and (folder / entry["progress"]).is_file():
+        return folder / entry["progress"]
+    if (folder / entry["path"] / "progress.csv").is_file():
+        return folder / entry["path"] / "progress.csv"
+    return Path(entry["path"]) / "progress.csv"
+
+
+def _runs_md(runs: Mapping[str, Mapping[str, str]]) -> str:
+    lines = [
+        f"- `{n}`: run `{e['path']}`"
+        + (f", training curves from [{e['progress']}]({e['progress']})" if "progress" in e else "")
+        for n, e in runs.items()
+    ]
+    note = "Run paths are relative to this folder; training curves link to copies in it."
+    return "\n".join(lines) + "\n\n" + note if lines else "none"
 
 
 def evaluate_runs(
@@ -118,49 +187,51 @@ def evaluate_runs(
     exploitability_steps: int = 0,
     checkpoints: Sequence[str] = (),
     callables: Sequence[str] = (),
+    scenario: str | None = None,
+    normalizers: Sequence[str] = (),
+    raw_obs: Sequence[str] = (),
+    teams: Sequence[str] = (),
+    adversaries: Sequence[str] = ("default",),
+    last: int | None = None,
+    sample: int | None = None,
+    seed: int = 0,
+    budgets: Sequence[float] = BUDGETS,
     progress: bool = True,
 ) -> Path:
-    """Evaluate runs' protagonists (and extra ones) against a population; return ``report.md``."""
+    """What ``advgame evaluate`` runs, through `evaluate_policies`; return ``report.md``.
+
+    The protagonists are the runs' final ones plus fixed policies given as ``NAME=...``
+    strings (`cli_protagonists`); the scenario is `scenario` or the runs'.
+    """
     found = {Path(r).name: (run_protagonist(Path(r)), Path(r)) for r in runs}
-    protagonists: dict[str, Any] = {n: spec for n, ((_, spec), _) in found.items()}
-    protagonists.update(_extra_protagonists(checkpoints, callables))
-    if not protagonists:
-        raise ConfigError("Nothing to evaluate: give run directories, --checkpoint or --callable.")
-    scenarios = {cfg.scenario for (cfg, _), _ in found.values()}
+    scenarios = {str(cfg.scenario) for (cfg, _), _ in found.values()}
+    scenarios |= {scenario} if scenario else set()
     if len(scenarios) > 1:
         raise ConfigError(
-            f"The runs are of different scenarios {sorted(scenarios)}; evaluate them apart."
+            f"The runs and --scenario name different scenarios {sorted(scenarios)}; "
+            "evaluate them apart."
         )
     if not scenarios:
-        raise ConfigError("Give at least one run directory (its scenario is evaluated).")
-    scenario = scenarios.pop()
-    columns = _adversary_columns(scenario, {n: (cfg, d) for n, ((cfg, _), d) in found.items()})
-    seed_list = tuple(range(seeds))
-    jobs = population_jobs(scenario, protagonists, columns, seeds=seed_list, episodes=episodes)
-    # A per-episode schedule needs several consecutive episodes per seed to move at all.
-    jobs = [
-        replace(j, episodes=max(episodes, SCHEDULE_EPISODES))
-        if j.adversary.startswith("scheduled")
-        else j
-        for j in jobs
-    ]
-    table = evaluate(
-        jobs,
-        workers=workers,
-        progress=progress,
-    )
-    sweep = evaluate(
-        budget_sweep(scenario, protagonists, BUDGETS, seeds=seed_list, episodes=episodes),
-        workers=workers,
-        progress=progress,
-    )
-    out.mkdir(parents=True, exist_ok=True)
-    table.to_csv(out / "payoff.csv")
-    sweep.to_csv(out / "budget.csv")
-    (out / "runs.json").write_text(json.dumps({n: str(d) for n, (_, d) in found.items()}, indent=2))
+        raise ConfigError("Give --scenario ID or a run directory (its scenario is evaluated).")
+    sid = str(scenarios.pop())
+    protagonists: dict[str, Any] = {n: spec for n, ((_, spec), _) in found.items()}
+    extra = cli_protagonists(
+        sid, checkpoints=checkpoints, normalizers=normalizers, raw_obs=raw_obs,
+        callables=callables, teams=teams,
+    )  # fmt: skip
+    clash = sorted(set(extra) & set(protagonists))
+    if clash:
+        raise ConfigError(f"Protagonist names {clash} are taken by runs; name them apart.")
+    protagonists.update(extra)
+    report = evaluate_policies(
+        sid, protagonists, out, adversaries=adversaries, runs={n: d for n, (_, d) in found.items()},
+        last=last, sample=sample, seed=seed, seeds=seeds, episodes=episodes, workers=workers,
+        budgets=budgets, progress=progress,
+    )  # fmt: skip
     if exploitability_steps:
-        _exploitability(scenario, found, out, exploitability_steps, episodes * seeds)
-    return report_folder(out, scenario=scenario)
+        _exploitability(sid, found, out, exploitability_steps, episodes * seeds)
+        report = report_folder(out, scenario=sid)
+    return report
 
 
 def _exploitability(scenario: str, found: dict, out: Path, steps: int, episodes: int) -> None:
@@ -180,7 +251,12 @@ def _exploitability(scenario: str, found: dict, out: Path, steps: int, episodes:
 
 def report_folder(folder: Path, scenario: str | None = None) -> Path:
     """(Re)build ``report.md`` and its plots from the files an evaluation wrote in `folder`."""
-    from advgame.report import plot_budget_curve, plot_training_curves, write_report
+    from advgame.report import (
+        adversary_listing,
+        plot_budget_curve,
+        plot_training_curves,
+        write_report,
+    )
 
     if not (folder / "payoff.csv").exists():
         raise ConfigError(
@@ -192,13 +268,16 @@ def report_folder(folder: Path, scenario: str | None = None) -> Path:
         figures["true return vs Gaussian state-noise σ"] = plot_budget_curve(
             PayoffTable.from_csv(folder / "budget.csv"), folder / "budget.png"
         )
-    runs = json.loads((folder / "runs.json").read_text()) if (folder / "runs.json").exists() else {}
-    curves = plot_training_curves(
-        {n: Path(d) / "progress.csv" for n, d in runs.items()}, folder / "training.png"
-    )
+    runs = _read_runs(folder)
+    csvs = {n: _progress_path(folder, e) for n, e in runs.items()}
+    curves = plot_training_curves(csvs, folder / "training.png") if csvs else None
     if curves is not None:
         figures["training curves"] = curves
-    sections = {"Runs": "\n".join(f"- `{n}`: `{d}`" for n, d in runs.items()) or "none"}
+    sections = {"Runs": _runs_md(runs)}
+    if (folder / "columns.json").exists():
+        sections["Adversary columns"] = adversary_listing(
+            json.loads((folder / "columns.json").read_text())
+        )
     if (folder / "exploitability.json").exists():
         sections["Exploitability"] = _exploit_md(
             json.loads((folder / "exploitability.json").read_text())

@@ -1,0 +1,272 @@
+"""Against whom: adversary columns of a payoff table from short specs, one registry entry a kind.
+
+A column spec is ``KIND[:ARG][,KEY=VALUE...]``; `adversary_columns` turns a list of them into
+named `AdversarySetup`s (``nominal`` always first, the metrics are relative to it)::
+
+    nominal                      the undisrupted game
+    preset:NAME                  a preset played by its suggested adversaries
+    random                       the paper's random presets the scenario has
+    scheduled                    the scenario's scheduled preset
+    learned[:RUN_DIR]            the latest learned snapshot of each adversary of a run (no
+                                 RUN_DIR: of every evaluated run)
+    population:RUN_DIR|FILE      every learned snapshot, one column per iteration; options
+                                 last=K, sample=K, preset=NAME (a file outside a run dir)
+    default                      nominal, random, scheduled, learned (``advgame evaluate``'s)
+
+A new kind is one function ``(ColumnContext, arg, options) -> {name: AdversarySetup}`` added
+to `COLUMN_KINDS`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from advgame.errors import ConfigError, UnknownNameError, did_you_mean
+from advgame.jobs import AdversarySetup
+from advgame.payoff import NOMINAL
+
+__all__ = [
+    "COLUMN_KINDS",
+    "DEFAULT_COLUMNS",
+    "RANDOM",
+    "SCHEDULED",
+    "ColumnContext",
+    "adversary_columns",
+    "describe_column",
+]
+
+RANDOM = ("state-gauss-0.1", "state-gauss-0.15", "state-uniform-0.2-0.8", "action-gauss-0.1")
+"""Random-mode presets of the ``random`` kind, where the scenario has them (the paper's)."""
+SCHEDULED = ("shift-sinusoid", "state-gauss-0.1-100F")
+"""The first of these the scenario has is the ``scheduled`` column."""
+DEFAULT_COLUMNS = ("nominal", "random", "scheduled", "learned")
+"""What ``default`` expands to: today's ``advgame evaluate`` columns."""
+
+
+@dataclass(frozen=True)
+class ColumnContext:
+    """What column kinds may read besides their own spec."""
+
+    scenario: str
+    """The evaluated scenario id."""
+    runs: Mapping[str, Path] = field(default_factory=dict)
+    """The evaluated runs, ``{name: run directory}`` (for ``learned`` without a run)."""
+    last: int | None = None
+    """Default ``last=K`` of population columns."""
+    sample: int | None = None
+    """Default ``sample=K`` of population columns."""
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    """Draws the snapshots of ``sample=K``."""
+    protagonists: Mapping[str, Any] = field(default_factory=dict)
+    """The evaluated protagonists' specs, ``{name: spec}`` (for kinds that attack them)."""
+
+
+Kind = Callable[[ColumnContext, str, Mapping[str, str]], dict[str, AdversarySetup]]
+
+
+def _nominal(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
+    return {NOMINAL: AdversarySetup.nominal()}
+
+
+def _preset(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
+    if not arg:
+        raise ConfigError("preset: needs a name, e.g. preset:state-gauss-0.1.")
+    return {f"preset {arg}": AdversarySetup.from_preset(ctx.scenario, arg)}
+
+
+def _random(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
+    from advgame.registry import scenario_spec
+
+    presets = scenario_spec(ctx.scenario).load_presets()
+    return {
+        f"random {n}": AdversarySetup.from_preset(ctx.scenario, n) for n in RANDOM if n in presets
+    }
+
+
+def _scheduled(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
+    from advgame.registry import scenario_spec
+
+    presets = scenario_spec(ctx.scenario).load_presets()
+    for name in SCHEDULED:
+        if name in presets:
+            return {f"scheduled {name}": AdversarySetup.from_preset(ctx.scenario, name)}
+    return {}
+
+
+def _learned(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
+    runs = {Path(arg).name: Path(arg)} if arg else dict(ctx.runs)
+    cols = {}
+    for name, run_dir in runs.items():
+        if not arg and not (run_dir / "population.json").is_file():
+            continue  # an evaluated run without a population has no learned column
+        preset, snaps = _snapshots(ctx, run_dir, opts)
+        latest = {agent: m for it in sorted(snaps) for agent, m in snaps[it].items()}
+        if latest:
+            cols[f"learned ({name})"] = _setup(preset, latest)
+    return cols
+
+
+def _population(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
+    if not arg:
+        raise ConfigError("population: needs a run directory or file, e.g. population:runs/atla.")
+    preset, snaps = _snapshots(ctx, Path(arg), opts)
+    its = _select(sorted(snaps), opts, ctx)
+    path = Path(arg)
+    source = path.parent.name if path.name == "population.json" else path.stem
+    return {f"population {source}@{it}": _setup(preset, snaps[it]) for it in its}
+
+
+def _default(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
+    cols: dict[str, AdversarySetup] = {}
+    for kind in DEFAULT_COLUMNS:
+        cols.update(COLUMN_KINDS[kind](ctx, "", {}))
+    return cols
+
+
+COLUMN_KINDS: dict[str, Kind] = {
+    "nominal": _nominal,
+    "preset": _preset,
+    "random": _random,
+    "scheduled": _scheduled,
+    "learned": _learned,
+    "population": _population,
+    "default": _default,
+}
+"""Column kinds by name: ``(context, argument, options) -> {column name: AdversarySetup}``."""
+
+
+def _setup(preset: str, members: Mapping[str, Any]) -> AdversarySetup:
+    specs = {a: replace(m.spec, deterministic=True) for a, m in members.items()}
+    return AdversarySetup({"preset": preset}, specs)
+
+
+def _snapshots(
+    ctx: ColumnContext, source: Path, opts: Mapping[str, str]
+) -> tuple[str, dict[int, dict[str, Any]]]:
+    """The preset and ``{iteration: {agent: learned adversary member}}`` of a run or file."""
+    from advgame.population import Population
+
+    file = source if source.suffix == ".json" else source / "population.json"
+    if not file.is_file():
+        raise ConfigError(
+            f"{source} has no population.json; give a run directory written by `advgame "
+            "train` or a population file."
+        )
+    snaps: dict[int, dict[str, Any]] = {}
+    for m in Population.load(file):
+        if m.side == "adversary" and m.learned:
+            snaps.setdefault(m.iteration, {})[m.agent] = m
+    return _preset_of(file, opts), snaps
+
+
+def _preset_of(file: Path, opts: Mapping[str, str]) -> str:
+    if "preset" in opts:
+        return opts["preset"]
+    config = file.parent / "config.json"
+    if not config.is_file():
+        raise ConfigError(
+            f"{file} is not in a run directory (no config.json beside it), so its preset is "
+            f"unknown; add it to the spec, e.g. population:{file},preset=atla."
+        )
+    import json
+
+    return str(json.loads(config.read_text()).get("preset", "default"))
+
+
+def _select(iterations: list[int], opts: Mapping[str, str], ctx: ColumnContext) -> list[int]:
+    last = _count(opts, "last", ctx.last)
+    sample = _count(opts, "sample", ctx.sample)
+    if last is not None and sample is not None:
+        raise ConfigError(f"Give last=K or sample=K, not both (got last={last}, sample={sample}).")
+    if last is not None:
+        return iterations[-last:]
+    if sample is not None and sample < len(iterations):
+        picked = ctx.rng.choice(len(iterations), size=sample, replace=False)
+        return [iterations[i] for i in sorted(picked)]
+    return iterations
+
+
+def _count(opts: Mapping[str, str], key: str, default: int | None) -> int | None:
+    if key not in opts:
+        return default
+    try:
+        value = int(opts[key])
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise ConfigError(f"{key}={opts[key]!r} must be an int >= 1: {key}=K keeps K snapshots.")
+    return value
+
+
+def parse_spec(spec: str) -> tuple[str, str, dict[str, str]]:
+    """Split ``KIND[:ARG][,KEY=VALUE...]`` into its kind, argument and options."""
+    head, *rest = spec.split(",")
+    kind, _, arg = head.partition(":")
+    if kind not in COLUMN_KINDS:
+        hint = did_you_mean(kind, COLUMN_KINDS)
+        raise UnknownNameError(
+            f"Unknown adversary column kind {kind!r} in {spec!r}.{hint} Kinds: {list(COLUMN_KINDS)}"
+        )
+    opts = {}
+    for item in rest:
+        key, sep, value = item.partition("=")
+        if not sep or key not in ("last", "sample", "preset"):
+            raise ConfigError(
+                f"Bad option {item!r} in {spec!r}; options are last=K, sample=K, preset=NAME."
+            )
+        opts[key] = value
+    return kind, arg, opts
+
+
+def adversary_columns(
+    scenario: str,
+    specs: Sequence[str] = ("default",),
+    *,
+    runs: Mapping[str, str | Path] | None = None,
+    last: int | None = None,
+    sample: int | None = None,
+    seed: int = 0,
+    protagonists: Mapping[str, Any] | None = None,
+) -> dict[str, AdversarySetup]:
+    """The adversary columns `specs` name, ``nominal`` first (see the module doc for kinds).
+
+    `runs` are the evaluated runs (``learned`` and ``default`` use them); `last` and `sample`
+    are the defaults of population columns that set neither; `seed` draws ``sample=K``;
+    `protagonists` (``{name: spec}``) are passed on to kinds that need them.
+    """
+    if isinstance(specs, str):
+        specs = [specs]
+    ctx = ColumnContext(
+        scenario,
+        {n: Path(d) for n, d in (runs or {}).items()},
+        _count({"last": str(last)}, "last", None) if last is not None else None,
+        _count({"sample": str(sample)}, "sample", None) if sample is not None else None,
+        np.random.default_rng(seed),
+        dict(protagonists or {}),
+    )
+    cols: dict[str, AdversarySetup] = {NOMINAL: AdversarySetup.nominal()}
+    for spec in specs:
+        kind, arg, opts = parse_spec(spec)
+        cols.update(COLUMN_KINDS[kind](ctx, arg, opts))
+    return cols
+
+
+def describe_column(setup: AdversarySetup) -> dict[str, Any]:
+    """A JSON-friendly description of a column: its game options and each adversary's spec."""
+    import dataclasses
+
+    def spec_text(spec: Any) -> str:
+        if dataclasses.is_dataclass(spec) and not isinstance(spec, type):
+            fields = ", ".join(f"{k}={v!r}" for k, v in dataclasses.asdict(spec).items())
+            return f"{type(spec).__name__}({fields})"
+        return getattr(spec, "__qualname__", None) or repr(spec)
+
+    return {
+        "game": {k: v for k, v in setup.make_kwargs.items() if k != "phase"},
+        "adversaries": {a: spec_text(s) for a, s in setup.specs.items()} or "none (no-ops)",
+    }
