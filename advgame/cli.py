@@ -101,6 +101,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         sample=args.sample,
         seed=args.seed,
         budgets=BUDGETS if args.budgets is None else args.budgets,
+        threat=args.threat,
     )
     print(f"report: {out}")
     return 0
@@ -127,6 +128,9 @@ _COLUMN_HELP = (
     "scheduled",
     "learned[:RUN_DIR] (latest learned snapshot; no RUN_DIR: of every evaluated run)",
     "population:RUN_DIR|FILE[,last=K|,sample=K][,preset=NAME] (one column per snapshot)",
+    "attack:random|mad|critic (noise in the threat model's observation budget, or a white-box "
+    "attack on each protagonist's own networks)",
+    "attacks = attack:random attack:mad attack:critic learned (the worst-of-attacks suite)",
     "default = nominal random scheduled learned",
 )
 
@@ -155,6 +159,12 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     group.add_argument("--last", type=int, metavar="K", help="population columns: last K only")
     group.add_argument("--sample", type=int, metavar="K", help="population columns: K drawn")
     p.add_argument("--seed", type=int, default=0, help="seed of --sample (default 0)")
+    p.add_argument(
+        "--threat",
+        metavar="PRESET",
+        help="the table's one threat model: the preset every attack, learned and best-response "
+        "column plays in (default: atla where the scenario has it, else default)",
+    )
     p.add_argument(
         "--budgets",
         nargs="*",

@@ -11,7 +11,23 @@ named `AdversarySetup`s (``nominal`` always first, the metrics are relative to i
                                  RUN_DIR: of every evaluated run)
     population:RUN_DIR|FILE      every learned snapshot, one column per iteration; options
                                  last=K, sample=K, preset=NAME (a file outside a run dir)
+    attack:random|mad|critic     an attack on the threat model's observation disruptor: noise
+                                 filling its budget, or a white-box attack on each protagonist's
+                                 own networks (`advgame.adversaries.whitebox`)
+    attacks                      the worst-of-attacks suite: attack:random, attack:mad,
+                                 attack:critic (skipped for teams: their actors have no critic)
+                                 and every evaluated run's learned adversaries
     default                      nominal, random, scheduled, learned (``advgame evaluate``'s)
+
+**One threat model per table.** A table compares protagonists like for like only if every one
+of them is attacked in the same disruptors and budgets. The *threat model* is a preset of the
+scenario (`ColumnContext.threat`; `default_threat` picks ``atla`` where the scenario has ATLA's
+budgets, else ``default``): attack columns, learned columns (a run's adversaries replayed in its
+budget) and best responses all use it, whatever preset each protagonist was trained in. A
+column's ``preset=NAME`` option overrides it for that column alone. Learned adversaries that do
+not fit the *default* threat model (other agents or action shapes, e.g. a partial attack on one
+agent of a team) play in the preset they were trained in; with a threat model given, a misfit
+is an error.
 
 A new kind is one function ``(ColumnContext, arg, options) -> {name: AdversarySetup}`` added
 to `COLUMN_KINDS`.
@@ -31,12 +47,14 @@ from advgame.jobs import AdversarySetup
 from advgame.payoff import NOMINAL
 
 __all__ = [
+    "ATTACKS",
     "COLUMN_KINDS",
     "DEFAULT_COLUMNS",
     "RANDOM",
     "SCHEDULED",
     "ColumnContext",
     "adversary_columns",
+    "default_threat",
     "describe_column",
 ]
 
@@ -64,6 +82,9 @@ class ColumnContext:
     """Draws the snapshots of ``sample=K``."""
     protagonists: Mapping[str, Any] = field(default_factory=dict)
     """The evaluated protagonists' specs, ``{name: spec}`` (for kinds that attack them)."""
+    threat: str | None = None
+    """The threat model given by the user: the preset whose disruptors and budgets attack,
+    learned and best-response columns play in (``None``: `default_threat`, see the module doc)."""
 
 
 Kind = Callable[[ColumnContext, str, Mapping[str, str]], dict[str, AdversarySetup]]
@@ -107,7 +128,7 @@ def _learned(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str,
         preset, snaps = _snapshots(ctx, run_dir, opts)
         latest = {agent: m for it in sorted(snaps) for agent, m in snaps[it].items()}
         if latest:
-            cols[f"learned ({name})"] = _setup(preset, latest)
+            cols[f"learned ({name})"] = _learned_setup(ctx, preset, latest, opts)
     return cols
 
 
@@ -118,7 +139,64 @@ def _population(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[s
     its = _select(sorted(snaps), opts, ctx)
     path = Path(arg)
     source = path.parent.name if path.name == "population.json" else path.stem
-    return {f"population {source}@{it}": _setup(preset, snaps[it]) for it in its}
+    return {f"population {source}@{it}": _learned_setup(ctx, preset, snaps[it], opts) for it in its}
+
+
+ATTACKS = ("random", "mad", "critic")
+"""The attacks of the ``attack:`` kind, and of the ``attacks`` suite (in this order)."""
+
+
+def default_threat(scenario: str) -> str:
+    """The shared threat model of a table: ATLA's budgets where the scenario has them."""
+    from advgame.registry import scenario_spec
+
+    return "atla" if "atla" in scenario_spec(scenario).load_presets() else "default"
+
+
+def _attack(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
+    from advgame.adversaries import CriticAttack, MADAttack, RandomAdversary
+
+    if arg not in ATTACKS:
+        hint = did_you_mean(arg, ATTACKS)
+        raise UnknownNameError(
+            f"Unknown attack {arg!r}.{hint} Attacks: attack:{', attack:'.join(ATTACKS)}."
+        )
+    preset = opts.get("preset") or ctx.threat or default_threat(ctx.scenario)
+    agent = _observation_agent(ctx.scenario, preset)
+    spec = {"random": RandomAdversary, "mad": MADAttack, "critic": CriticAttack}[arg]()
+    return {f"attack {arg}": AdversarySetup({"preset": preset}, {agent: spec})}
+
+
+def _observation_agent(scenario: str, preset: str) -> str:
+    """The adversary of `preset`'s bounded observation disruptor (what attacks play)."""
+    from advgame.registry import scenario_spec
+
+    presets = scenario_spec(scenario).load_presets()
+    if preset not in presets:
+        hint = did_you_mean(preset, presets)
+        raise UnknownNameError(f"Scenario {scenario!r} has no preset {preset!r}.{hint}")
+    found = [
+        d.agent
+        for d in presets[preset].disruptors
+        if d.kind == "observation" and getattr(d, "bounded", False)
+    ]
+    if not found:
+        raise ConfigError(
+            f"The threat model {preset!r} of {scenario} has no bounded observation disruptor, "
+            "so attack columns have no budget to search; choose one that has (e.g. atla or "
+            "default) with --threat / threat=."
+        )
+    return found[0]
+
+
+def _attacks(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
+    teams = any(isinstance(spec, Mapping) for spec in ctx.protagonists.values())
+    cols: dict[str, AdversarySetup] = {}
+    for name in ATTACKS:
+        if not (teams and name == "critic"):
+            cols.update(_attack(ctx, name, opts))
+    cols.update(_learned(ctx, "", opts))
+    return cols
 
 
 def _default(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
@@ -135,14 +213,60 @@ COLUMN_KINDS: dict[str, Kind] = {
     "scheduled": _scheduled,
     "learned": _learned,
     "population": _population,
+    "attack": _attack,
+    "attacks": _attacks,
     "default": _default,
 }
 """Column kinds by name: ``(context, argument, options) -> {column name: AdversarySetup}``."""
 
 
-def _setup(preset: str, members: Mapping[str, Any]) -> AdversarySetup:
+def _learned_setup(
+    ctx: ColumnContext, trained_in: str, members: Mapping[str, Any], opts: Mapping[str, str]
+) -> AdversarySetup:
+    """Learned snapshots replayed (deterministically) in the table's threat model.
+
+    The column's ``preset=`` option or an explicit threat model must fit the adversaries (same
+    agents, same action shapes), else it is an error. Without either, they play in the default
+    threat model where they fit, else in the preset they were trained in (e.g. a partial attack
+    on one agent of a team cannot act in a budget over every agent).
+    """
     specs = {a: replace(m.spec, deterministic=True) for a, m in members.items()}
+    chosen = opts.get("preset") or ctx.threat
+    if chosen:
+        problem = _misfit(ctx.scenario, chosen, specs)
+        if problem:
+            raise ConfigError(
+                f"{problem}; evaluate in the preset they were trained in ({trained_in!r}) with "
+                "--threat or the column's preset=NAME."
+            )
+        return AdversarySetup({"preset": chosen}, specs)
+    shared = default_threat(ctx.scenario)
+    preset = trained_in if _misfit(ctx.scenario, shared, specs) else shared
     return AdversarySetup({"preset": preset}, specs)
+
+
+def _misfit(scenario: str, preset: str, specs: Mapping[str, Any]) -> str:
+    """Why `specs` cannot act in `preset` of `scenario` ('' if they can)."""
+    from advgame import make
+    from advgame.checkpoint import SB3Checkpoint, load_model
+
+    game = make(scenario, preset=preset)
+    shapes = {a: game.action_space(a).shape for a in game.adversaries}
+    game.close()
+    for agent, spec in specs.items():
+        if agent not in shapes:
+            return (
+                f"A learned adversary plays {agent!r}, but the threat model {preset!r} of "
+                f"{scenario} has no such agent (it has {sorted(shapes)})"
+            )
+        if isinstance(spec, SB3Checkpoint):
+            have = load_model(str(spec.path), spec.algo).action_space.shape
+            if have != shapes[agent]:
+                return (
+                    f"The learned {agent!r} acts with shape {have}, but in the threat model "
+                    f"{preset!r} of {scenario} it has {shapes[agent]}"
+                )
+    return ""
 
 
 def _snapshots(
@@ -232,12 +356,14 @@ def adversary_columns(
     sample: int | None = None,
     seed: int = 0,
     protagonists: Mapping[str, Any] | None = None,
+    threat: str | None = None,
 ) -> dict[str, AdversarySetup]:
     """The adversary columns `specs` name, ``nominal`` first (see the module doc for kinds).
 
     `runs` are the evaluated runs (``learned`` and ``default`` use them); `last` and `sample`
     are the defaults of population columns that set neither; `seed` draws ``sample=K``;
-    `protagonists` (``{name: spec}``) are passed on to kinds that need them.
+    `protagonists` (``{name: spec}``) are passed on to kinds that need them; `threat` is the
+    table's threat model (see the module doc; ``None``: the default one).
     """
     if isinstance(specs, str):
         specs = [specs]
@@ -248,6 +374,7 @@ def adversary_columns(
         _count({"sample": str(sample)}, "sample", None) if sample is not None else None,
         np.random.default_rng(seed),
         dict(protagonists or {}),
+        threat,
     )
     cols: dict[str, AdversarySetup] = {NOMINAL: AdversarySetup.nominal()}
     for spec in specs:

@@ -20,7 +20,13 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from advgame.columns import RANDOM, SCHEDULED, adversary_columns, describe_column
+from advgame.columns import (
+    RANDOM,
+    SCHEDULED,
+    adversary_columns,
+    default_threat,
+    describe_column,
+)
 from advgame.errors import ConfigError
 from advgame.evaluation import (
     NOMINAL,
@@ -66,6 +72,7 @@ def evaluate_policies(
     workers: int = 2,
     budgets: Sequence[float] = BUDGETS,
     progress: bool = True,
+    threat: str | None = None,
 ) -> Path:
     """Evaluate fixed policies against chosen adversary columns; write the folder, return ``report.md``.
 
@@ -84,6 +91,8 @@ def evaluate_policies(
         workers: evaluation processes.
         budgets: σ levels of the state-noise sweep (empty: no sweep).
         progress: show progress bars.
+        threat: the table's one threat model, a preset of `scenario` that attack, learned and
+            best-response columns all play in (default `advgame.columns.default_threat`).
 
     """
     out = Path(out)
@@ -102,6 +111,7 @@ def evaluate_policies(
             sample=sample,
             seed=seed,
             protagonists=protagonists,
+            threat=threat,
         )
     seed_list = tuple(range(seeds))
     jobs = population_jobs(scenario, protagonists, columns, seeds=seed_list, episodes=episodes)
@@ -122,8 +132,35 @@ def evaluate_policies(
         (out / "budget.csv").unlink(missing_ok=True)
     columns_json = {n: describe_column(s) for n, s in columns.items()}
     (out / "columns.json").write_text(json.dumps(columns_json, indent=2, default=str) + "\n")
+    record = _threat_record(scenario, threat or default_threat(scenario))
+    (out / "threat.json").write_text(json.dumps(record, indent=2) + "\n")
     _write_runs(out, run_dirs)
     return report_folder(out, scenario=scenario)
+
+
+def _threat_record(scenario: str, preset: str) -> dict[str, Any]:
+    """What the threat model is, for ``threat.json`` and the report."""
+    from advgame.registry import scenario_spec
+
+    presets = scenario_spec(scenario).load_presets()
+    if preset not in presets:
+        raise ConfigError(f"The threat model must be a preset of {scenario}: {sorted(presets)}.")
+    return {
+        "preset": preset,
+        "description": presets[preset].description,
+        "disruptors": [repr(d) for d in presets[preset].disruptors],
+    }
+
+
+def _threat_md(record: Mapping[str, Any]) -> str:
+    lines = [
+        f"Preset `{record['preset']}` ({record['description']}). Attack columns, learned "
+        "columns and best responses all play in it, whatever preset each protagonist was "
+        "trained in, so every row faces the same disruptors and budgets (learned adversaries "
+        "that cannot act in it play in their training preset: see each column's game above):",
+        "",
+    ]
+    return "\n".join(lines + [f"- `{d}`" for d in record["disruptors"]])
 
 
 def _write_runs(out: Path, runs: Mapping[str, Path]) -> None:
@@ -197,6 +234,7 @@ def evaluate_runs(
     seed: int = 0,
     budgets: Sequence[float] = BUDGETS,
     progress: bool = True,
+    threat: str | None = None,
 ) -> Path:
     """What ``advgame evaluate`` runs, through `evaluate_policies`; return ``report.md``.
 
@@ -226,24 +264,27 @@ def evaluate_runs(
     report = evaluate_policies(
         sid, protagonists, out, adversaries=adversaries, runs={n: d for n, (_, d) in found.items()},
         last=last, sample=sample, seed=seed, seeds=seeds, episodes=episodes, workers=workers,
-        budgets=budgets, progress=progress,
+        budgets=budgets, progress=progress, threat=threat,
     )  # fmt: skip
     if exploitability_steps:
-        _exploitability(sid, found, out, exploitability_steps, episodes * seeds)
+        threat = threat or default_threat(sid)
+        _exploitability(sid, found, out, exploitability_steps, episodes * seeds, threat)
         report = report_folder(out, scenario=sid)
     return report
 
 
-def _exploitability(scenario: str, found: dict, out: Path, steps: int, episodes: int) -> None:
+def _exploitability(
+    scenario: str, found: dict, out: Path, steps: int, episodes: int, threat: str
+) -> None:
+    """Best responses to every run's protagonist, all trained in the one threat model."""
     from advgame.exploit import exploitability
 
     results = {}
-    for name, ((cfg, spec), _) in found.items():
-        preset = cfg.preset if cfg.learned != [] else "default"
+    for name, ((_, spec), _) in found.items():
         results[name] = {
-            "preset": preset,
+            "preset": threat,
             **exploitability(
-                scenario, preset, spec, out / "best_response" / name, steps=steps, episodes=episodes
+                scenario, threat, spec, out / "best_response" / name, steps=steps, episodes=episodes
             ),
         }
     (out / "exploitability.json").write_text(json.dumps(results, indent=2))
@@ -274,6 +315,8 @@ def report_folder(folder: Path, scenario: str | None = None) -> Path:
     if curves is not None:
         figures["training curves"] = curves
     sections = {"Runs": _runs_md(runs)}
+    if (folder / "threat.json").exists():
+        sections["Threat model"] = _threat_md(json.loads((folder / "threat.json").read_text()))
     if (folder / "columns.json").exists():
         sections["Adversary columns"] = adversary_listing(
             json.loads((folder / "columns.json").read_text())
@@ -291,7 +334,7 @@ def report_folder(folder: Path, scenario: str | None = None) -> Path:
 def _exploit_md(results: dict[str, dict[str, Any]]) -> str:
     lines = [
         "Return under best-response adversaries trained against each frozen protagonist "
-        "within the preset's budget (an upper bound on the worst case).",
+        "within the threat model's budget (the same preset for every protagonist).",
         "",
         "| protagonist | preset | nominal | best response | exploitability | steps |",
         "|---|---|---|---|---|---|",
