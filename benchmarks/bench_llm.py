@@ -46,11 +46,11 @@ def _game(every: int) -> Any:
     )
 
 
-def _adversaries(transcript: str | None = None) -> dict[str, Any]:
+def _adversaries(transcript: str | None = None, mode: str = "sync") -> dict[str, Any]:
     from advgame.adversaries import LLMAdversary, UniformAdversary
 
     return {
-        "llm": LLMAdversary(region=(0.2, 0.8), task=TASK, transcript=transcript),
+        "llm": LLMAdversary(region=(0.2, 0.8), task=TASK, transcript=transcript, mode=mode),  # type: ignore[arg-type]
         "uniform": UniformAdversary(0.2, 0.8),
     }
 
@@ -91,7 +91,7 @@ def latency(out: Path, steps: int) -> dict[str, Any]:
     return rows
 
 
-def _train(kind: str, seed: int, steps: int, out: Path) -> dict[str, Any]:
+def _train(kind: str, seed: int, steps: int, out: Path, mode: str) -> dict[str, Any]:
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv
@@ -101,7 +101,7 @@ def _train(kind: str, seed: int, steps: int, out: Path) -> dict[str, Any]:
     torch.set_num_threads(1)
     run = out / "runs" / f"{kind}-s{seed}"
     run.mkdir(parents=True, exist_ok=True)
-    spec = _adversaries(str(run / "transcript.jsonl"))[kind]
+    spec = _adversaries(str(run / "transcript.jsonl"), mode)[kind]
     view = SingleAgentView(_game(100), "protagonist", {"observation_adversary": spec})
     venv = DummyVecEnv([lambda: view])
     model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0)
@@ -132,7 +132,9 @@ def _evaluate(model: Any, attack: str | None, seed: int, episodes: int) -> float
     return float(np.mean([r.true_return for r in results]))
 
 
-def experiment(out: Path, seeds: int, steps: int, episodes: int, kinds: list[str]) -> dict:
+def experiment(
+    out: Path, seeds: int, steps: int, episodes: int, kinds: list[str], mode: str
+) -> dict:
     """PPO under the LLM vs uniform observation adversary (every 100 steps), then evaluation."""
     path = out / "experiment.json"
     results = json.loads(path.read_text()) if path.exists() else {}
@@ -141,7 +143,7 @@ def experiment(out: Path, seeds: int, steps: int, episodes: int, kinds: list[str
             key = f"{kind}-s{seed}"
             if key in results:
                 continue
-            row = _train(kind, seed, steps, out)
+            row = _train(kind, seed, steps, out, mode)
             model = row.pop("model")
             for attack in (None, "uniform", "llm"):
                 row[f"eval_{attack or 'nominal'}"] = _evaluate(model, attack, seed, episodes)
@@ -177,12 +179,20 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--episodes", type=int, default=5)
     parser.add_argument("--kinds", nargs="+", default=["uniform", "llm"])
+    parser.add_argument(
+        "--train-mode",
+        choices=["sync", "async"],
+        default="async",
+        help="LLM calls during training: async never blocks PPO (evaluation is always sync)",
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     if args.part == "latency":
         latency(args.out, args.steps or 1000)
     else:
-        experiment(args.out, args.seeds, args.steps or 12288, args.episodes, args.kinds)
+        experiment(
+            args.out, args.seeds, args.steps or 8192, args.episodes, args.kinds, args.train_mode
+        )
 
 
 if __name__ == "__main__":

@@ -331,3 +331,33 @@ def test_local_model_config_is_validated() -> None:
         LocalModel(path="/nonexistent/model.gguf")
     with pytest.raises(ConfigError, match="threads"):
         LocalModel(threads=0)
+
+
+@needs_local
+@pytest.mark.llm
+def test_server_dies_with_its_parent(tmp_path: Path) -> None:
+    """A run killed without clean-up (SIGKILL) leaves no llama.cpp server behind."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    code = (
+        "from advgame.adversaries import llm_backends as b\n"
+        "b.local_server_url(b.smollm2_path(), 1, 512, 300.0)\n"
+        "print(*[p.pid for p, _ in b._SERVERS.values()], flush=True)\n"
+        "import time; time.sleep(300)\n"
+    )
+    parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert parent.stdout is not None
+    child = int(parent.stdout.readline())
+    os.kill(parent.pid, signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        try:
+            os.kill(child, 0)
+        except ProcessLookupError:
+            return
+        time.sleep(0.2)
+    pytest.fail(f"llama.cpp server {child} outlived its killed parent")
