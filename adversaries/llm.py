@@ -82,8 +82,8 @@ class LLMAdversary:
     """What a rejected reply or a failed call plays: the no-op, or uniform in the region."""
     mode: Literal["sync", "async"] = "sync"
     """``"sync"``: wait for each reply (reproducible). ``"async"``: never block the simulator;
-    play the last applied perturbation (the fallback before the first reply) while a call is
-    pending, and apply the reply on the first move after it arrives."""
+    play the last applied perturbation, across episodes (the fallback before the first reply),
+    while a call is pending, and apply the reply on the first move after it arrives."""
     history: int = 3
     """How many of its own recent perturbations the prompt shows."""
     digits: int = 3
@@ -227,7 +227,8 @@ class LLMPolicy:
         if seed is not None:
             self.rng = np.random.default_rng(seed)
         self._recent.clear()
-        self._current = None
+        if self.spec.mode == "sync":
+            self._current = None  # async keeps playing its last reply across episodes
         self.episode, self.step = self.episode + 1, 0
 
     def prompt(self, observation: Any) -> str:

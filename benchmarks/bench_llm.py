@@ -154,6 +154,51 @@ def experiment(
     return results
 
 
+def attack(out: Path, seeds: int, episodes: int, every: int) -> dict:
+    """Fixed protagonists (the U-trained PPO policies) under each attack, every `every` steps."""
+    from stable_baselines3 import PPO
+
+    import advgame
+    from advgame.adversaries import ConstantAdversary, ZeroAdversary
+
+    path = out / f"attack-every-{every}.json"
+    results = json.loads(path.read_text()) if path.exists() else {}
+    attacks = {
+        "none": ZeroAdversary(),
+        **_adversaries(str(out / f"attack-every-{every}-transcript.jsonl")),
+        "constant-0.8": ConstantAdversary(0.8),
+    }
+    for seed in range(seeds):
+        model = PPO.load(out / "runs" / f"uniform-s{seed}" / "ppo", device="cpu")
+        for name, spec in attacks.items():
+            key = f"{name}-s{seed}"
+            if key in results:
+                continue
+            game = _game(every)
+            pols = {"protagonist": lambda o, m=model: m.predict(o, deterministic=True)[0]}
+            start = time.perf_counter()
+            runs = advgame.rollout(
+                game, {**pols, "observation_adversary": spec}, seed=20_000 + seed, episodes=episodes
+            )
+            results[key] = {
+                "return": float(np.mean([r.true_return for r in runs])),
+                "length": float(np.mean([r.length for r in runs])),
+                "wall_s": time.perf_counter() - start,
+            }
+            path.write_text(json.dumps(results, indent=2))
+            print(key, results[key], flush=True)
+    lines = [
+        f"| attack every {every} steps | true return (mean ± 95 % CI over seeds) |",
+        "|---|---|",
+    ]
+    for name in attacks:
+        values = [v["return"] for k, v in results.items() if k.rsplit("-s", 1)[0] == name]
+        lines.append(f"| {name} | {fmt(values)} |")
+    (out / f"attack-every-{every}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return results
+
+
 def _table(results: dict, out: Path) -> None:
     lines = [
         "| trained under | train steps/s | eval nominal | eval under U(0.2, 0.8) | eval under LLM C[0.2, 0.8] |",
@@ -173,7 +218,8 @@ def _table(results: dict, out: Path) -> None:
 def main() -> None:
     """Parse the command line and run one part."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("part", choices=["latency", "experiment"])
+    parser.add_argument("part", choices=["latency", "experiment", "attack"])
+    parser.add_argument("--every", type=int, default=5, help="attack: call frequency")
     parser.add_argument("--out", type=Path, default=Path("docs/llm-results"))
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--seeds", type=int, default=3)
@@ -189,6 +235,8 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     if args.part == "latency":
         latency(args.out, args.steps or 1000)
+    elif args.part == "attack":
+        attack(args.out, args.seeds, args.episodes, args.every)
     else:
         experiment(
             args.out, args.seeds, args.steps or 8192, args.episodes, args.kinds, args.train_mode

@@ -361,3 +361,15 @@ def test_server_dies_with_its_parent(tmp_path: Path) -> None:
             return
         time.sleep(0.2)
     pytest.fail(f"llama.cpp server {child} outlived its killed parent")
+
+
+def test_async_mode_keeps_its_last_reply_across_episodes(scripted: Callable[..., Scripted]) -> None:
+    server = scripted(lambda body: (time.sleep(0.2), (200, "[" + ", ".join(["0.8"] * 11) + "]"))[1])
+    spec = LLMAdversary(backend=server.endpoint(), region=(0.2, 0.8), mode="async", cache_size=0)
+    pol = _policy(spec, _obs_game())
+    pol.act(np.zeros(11))
+    time.sleep(0.5)
+    np.testing.assert_allclose(pol.act(np.ones(11)), 1.0)  # the first reply lands
+    pol.reset(seed=1)
+    np.testing.assert_allclose(pol.act(np.full(11, 2.0)), 1.0)  # still played while pending
+    pol.close()
