@@ -109,8 +109,12 @@ def _train(kind: str, seed: int, steps: int, out: Path, mode: str) -> dict[str, 
     model.learn(total_timesteps=steps)
     wall = time.perf_counter() - start
     model.save(run / "ppo")
-    counters = dict(getattr(view.policies["observation_adversary"], "counters", {}))
+    adversary = view.policies["observation_adversary"]
+    counters = dict(getattr(adversary, "counters", {}))
+    if hasattr(adversary, "close"):
+        adversary.close()  # the async worker thread
     return {
+        "train_mode": mode if kind == "llm" else None,
         "train_wall_s": wall,
         "train_steps_per_s": steps / wall,
         "counters": counters,
