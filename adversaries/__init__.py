@@ -1,4 +1,4 @@
-"""Adversary policies: noise, scheduled shifts, white-box attacks (MAD, critic, PGD), and more.
+"""Adversary policies: noise, scheduled shifts, white-box attacks (MAD, critic, PGD), LLMs.
 
 Every adversary here is a frozen, picklable *spec* with ``build(info) -> Policy``; the built
 policy speaks the one `advgame.policy.Policy` interface (``reset(seed)``, ``act(obs)``), so
@@ -22,11 +22,31 @@ from advgame.adversaries.noise import (
 from advgame.adversaries.scheduled import ConstantAdversary, SinusoidAdversary
 from advgame.adversaries.whitebox import CriticAttack, MADAttack, PGDAttack
 
+# The LLM adversary and its backends load on first use: `import advgame` never imports them.
+_LAZY = {
+    "LLMAdversary": "advgame.adversaries.llm",
+    "LocalModel": "advgame.adversaries.llm_backends",
+    "OpenAIEndpoint": "advgame.adversaries.llm_backends",
+}
+
+
+def __getattr__(name: str) -> object:
+    """Import the LLM adversary's names when they are first asked for."""
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'advgame.adversaries' has no attribute {name!r}")
+
+
 __all__ = [
     "ConstantAdversary",
     "CriticAttack",
     "GaussianAdversary",
+    "LLMAdversary",
+    "LocalModel",
     "MADAttack",
+    "OpenAIEndpoint",
     "PGDAttack",
     "RandomAdversary",
     "SinusoidAdversary",
