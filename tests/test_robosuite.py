@@ -17,9 +17,18 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 import advgame
-from advgame.disruptors import ArmDisruptor, DynamicsDisruptor, ObservationDisruptor, Param
+from advgame.disruptors import (
+    ArmDisruptor,
+    DynamicsDisruptor,
+    ObservationDisruptor,
+    Param,
+    WorkspaceDisruptor,
+)
 from advgame.errors import ConfigError, UnknownNameError
 from advgame.schedule import Schedule
 
@@ -250,3 +259,68 @@ def test_image_observations_are_an_option() -> None:
     if "ok" not in done.stdout and ("EGL" in done.stderr or "glGetError" in done.stderr):
         pytest.skip(f"no off-screen EGL context here: {done.stderr.strip().splitlines()[-1]}")
     assert done.returncode == 0 and "ok" in done.stdout, done.stderr[-2000:]
+
+
+# -- properties of the two new disruptors (one game each, hypothesis over the action) ---------
+FEW = settings(max_examples=12, deadline=None)
+UNITS = hnp.arrays(np.float32, 4, elements=st.floats(-3.0, 3.0, width=32))
+
+
+@pytest.fixture(scope="module")
+def workspace_game(warm: None) -> Iterator[advgame.Game]:
+    from advgame.scenarios.robosuite import lift_causal, table_shift
+
+    shifts = (*table_shift("Lift").shifts, *lift_causal().shifts)
+    game = advgame.make(
+        "RS-Lift", disruptors=[WorkspaceDisruptor(shifts=shifts)], max_episode_steps=3
+    )
+    yield game
+    game.close()
+
+
+@FEW
+@given(u=UNITS)
+def test_workspace_within_budget_identity_at_zero_restored(
+    workspace_game: advgame.Game, u: np.ndarray
+) -> None:
+    game, sim = workspace_game, workspace_game.task.sim
+    table, cube = _id(game, "body", "table"), _id(game, "body", "cube_main")
+    geom = _id(game, "geom", "cube_g0_vis")
+    game.reset(seed=0)
+    model0 = (sim.model.body_pos.copy(), sim.model.geom_rgba.copy())
+    cube0 = sim.data.xpos[cube].copy()
+    move = game.play({"workspace_adversary": u})
+    c = np.clip(u.astype(np.float64), -1.0, 1.0)
+    assert move.clipped["workspace_adversary"] == int(np.count_nonzero(np.abs(u) > 1.0))
+    shift = sim.model.body_pos[table] - model0[0][table]
+    np.testing.assert_allclose(shift, c[:3] * [0.05, 0.05, 0.03], atol=1e-9)  # in the budget
+    np.testing.assert_allclose(
+        sim.data.xpos[cube] - cube0, shift + np.array([0.0, 0.08 * c[3], 0.0]), atol=1e-9
+    )
+    rgba = sim.model.geom_rgba[geom]
+    assert np.all((rgba >= 0.0) & (rgba <= 1.0))
+    if not np.any(c):  # the zero action is the identity
+        np.testing.assert_array_equal(sim.model.body_pos, model0[0])
+    game.reset(seed=0)
+    np.testing.assert_array_equal(sim.model.body_pos, model0[0])
+    np.testing.assert_array_equal(sim.model.geom_rgba, model0[1])
+
+
+@pytest.fixture(scope="module")
+def arm_game(warm: None) -> Iterator[advgame.Game]:
+    game = advgame.make("RS-MultiRobustDoor", disruptors=[ArmDisruptor(robot=1, scale=0.5)])
+    yield game
+    game.close()
+
+
+@FEW
+@given(u=hnp.arrays(np.float32, 7, elements=st.floats(-3.0, 3.0, width=32)))
+def test_arm_command_stays_in_its_budget(arm_game: advgame.Game, u: np.ndarray) -> None:
+    game = arm_game
+    game.reset(seed=0)
+    game.play({"protagonist": np.zeros(7), "arm_adversary": u})
+    command = game.task.external_actions[1]
+    np.testing.assert_allclose(command, 0.5 * np.clip(u, -1.0, 1.0), atol=1e-7)
+    assert np.all(np.abs(command) <= 0.5)
+    game.reset(seed=0)
+    assert not np.any(game.task.external_actions[1])  # no command leaks into the next episode
