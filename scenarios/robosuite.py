@@ -12,7 +12,8 @@ Lift, Stack and Door add ``table`` (table offset and height per episode: ±5 cm 
 dimension moves the door up to 10 cm away and raises the handle up to 5 cm, together); Lift adds
 ``lift-causal`` (one dimension moves the cube up to 8 cm along y and turns it blue (u > 0) or
 green (u < 0)). MultiRobustDoor's ``default`` is the adversarial arm (robot 1, its controller's
-full range); its ``full`` adds observation and action adversaries.
+full range), and so is its ``rarl`` (what ``--method rarl`` trains: the arm at half its range,
+evaluated at its full range); its ``full`` adds observation and action adversaries.
 """
 
 from __future__ import annotations
@@ -123,6 +124,7 @@ def presets(scenario_id: str) -> dict[str, Preset]:
         arm = ArmDisruptor(robot=1)
         return {
             "default": Preset((arm,), description="an adversarial second arm (robot 1)"),
+            "rarl": Preset((arm,), description="the adversarial arm (for --method rarl)"),
             "full": Preset((arm, *full), description="adversarial arm and every other kind"),
         }
     out = {

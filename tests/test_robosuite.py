@@ -177,6 +177,12 @@ def test_arm_budget_scales_the_command_and_needs_an_external_robot(warm: None) -
     game.close()
 
 
+def test_rarl_training_fraction_scales_the_arm_budget() -> None:
+    from advgame.training import scaled
+
+    assert scaled(ArmDisruptor(scale=0.8), 0.5).scale == pytest.approx(0.4)
+
+
 def test_observation_keys_target_only_object_state(warm: None) -> None:
     spec = ObservationDisruptor(eps=0.5, keys=["object-state"])
     game = advgame.make("RS-Door", disruptors=[spec], max_episode_steps=3)
@@ -324,3 +330,15 @@ def test_arm_command_stays_in_its_budget(arm_game: advgame.Game, u: np.ndarray) 
     assert np.all(np.abs(command) <= 0.5)
     game.reset(seed=0)
     assert not np.any(game.task.external_actions[1])  # no command leaks into the next episode
+
+
+def test_advgame_list_shows_the_robosuite_family(capsys: pytest.CaptureFixture[str]) -> None:
+    from advgame.cli import main
+
+    assert main(["list", "--family", "robosuite", "--presets", "RS-MultiRobustDoor"]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0].split()[:2] == ["RS-MultiRobustDoor", "robosuite"]
+    assert "adversarial second arm" in out
+    assert main(["list", "--family", "robosuite"]) == 0
+    ids = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert ids == advgame.list_scenarios("robosuite") and len(ids) == 12
