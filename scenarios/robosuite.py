@@ -4,10 +4,10 @@ Presets of every robosuite scenario:
 
 * ``default``: bounded observation (ε = 0.05, raw units) and action (ε = 0.1) adversaries;
 * ``full``: observation, observed-reward, action and a per-episode dynamics shift (every body's
-  mass, geom friction and joint damping within ±20 % of nominal);
-* ``object-obs``: an observation attack on the ``object-state`` key only (ε = 0.05).
+  mass, geom friction and joint damping within ±20 % of nominal).
 
-Lift, Stack and Door add ``table`` (table offset and height per episode: ±5 cm in x and y,
+Lift, Stack and Door add ``object-obs`` (an observation attack on the ``object-state`` key only,
+ε = 0.05; any scenario takes ``ObservationDisruptor(keys=["object-state"])``) and ``table`` (table offset and height per episode: ±5 cm in x and y,
 ±3 cm in height, objects moving with the table); Door adds ``door-causal`` (one adversary
 dimension moves the door up to 10 cm away and raises the handle up to 5 cm, together); Lift adds
 ``lift-causal`` (one dimension moves the cube up to 8 cm along y and turns it blue (u > 0) or
@@ -130,13 +130,13 @@ def presets(scenario_id: str) -> dict[str, Preset]:
     out = {
         "default": Preset(base, description="bounded observation and action adversaries"),
         "full": Preset(full, description="observation, reward, action and dynamics"),
-        "object-obs": Preset(
+    }
+    if env in TABLE_OBJECTS:
+        out["object-obs"] = Preset(
             (ObservationDisruptor(eps=0.05, keys=("object-state",)),),
             {"observation_adversary": GaussianAdversary(std=0.02)},
             "observation attack on the object-state key only",
-        ),
-    }
-    if env in TABLE_OBJECTS:
+        )
         out["table"] = Preset(
             (table_shift(env),), description="table offset and height per episode"
         )
