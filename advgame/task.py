@@ -262,6 +262,17 @@ class GymTask(TaskBase):
         """The protagonist's true observation is the state."""
         return observations[self.AGENT]
 
+    def observe(self) -> dict[str, Any]:
+        """Re-observe a Gymnasium MuJoCo env after a simulator edit (its ``_get_obs``)."""
+        inner = self.env.unwrapped
+        get_obs = getattr(inner, "_get_obs", None)
+        if get_obs is None or not hasattr(inner, "data"):
+            return super().observe()
+        import mujoco
+
+        mujoco.mj_forward(inner.model, inner.data)
+        return {self.AGENT: get_obs()}
+
     @property
     def sim(self) -> MujocoSim:
         """The MuJoCo handle (MuJoCo tasks only)."""

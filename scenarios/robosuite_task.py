@@ -245,14 +245,11 @@ def _make_env(
 ) -> Any:
     import robosuite
 
-    from advgame.scenarios import robosuite_envs  # registers MultiRobustDoor with robosuite
+    import advgame.scenarios.robosuite_envs  # noqa: F401 - registers MultiRobustDoor with robosuite
 
-    known = sorted(robosuite.ALL_ENVIRONMENTS)
-    if env_name not in known:
-        raise UnknownNameError(
-            f"No robosuite environment {env_name!r}.{did_you_mean(env_name, known)} Known: {known}."
-        )
-    del robosuite_envs
+    _check_name("robosuite environment", env_name, robosuite.ALL_ENVIRONMENTS)
+    for robot in [robots] if isinstance(robots, str) else robots:
+        _check_name("robosuite robot", robot, robosuite.ALL_ROBOTS)
     options: dict[str, Any] = {
         "has_renderer": False,
         "has_offscreen_renderer": camera_obs,
@@ -263,3 +260,10 @@ def _make_env(
         **kwargs,
     }
     return robosuite.make(env_name, robots=robots, **options)
+
+
+def _check_name(what: str, name: str, known: Any) -> None:
+    """Raise a "did you mean" error for a name robosuite does not know."""
+    names = sorted(known)
+    if name not in names:
+        raise UnknownNameError(f"No {what} {name!r}.{did_you_mean(name, names)} Known: {names}.")

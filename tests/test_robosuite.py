@@ -214,6 +214,8 @@ def test_unknown_robosuite_env_suggests_the_name(warm: None) -> None:
 
     with pytest.raises(UnknownNameError, match='Did you mean "Lift"'):
         RobosuiteTask("Lfit")
+    with pytest.raises(UnknownNameError, match='Did you mean "Panda"'):
+        RobosuiteTask("Lift", robots="Pnda")
 
 
 def test_multidoor_trains_in_the_loop_and_resumes(tmp_path: Path, one_torch_thread: None) -> None:
