@@ -264,7 +264,7 @@ class GymTask(TaskBase):
 
     def observe(self) -> dict[str, Any]:
         """Re-observe a Gymnasium MuJoCo env after a simulator edit (its ``_get_obs``)."""
-        inner = self.env.unwrapped
+        inner: Any = self.env.unwrapped
         get_obs = getattr(inner, "_get_obs", None)
         if get_obs is None or not hasattr(inner, "data"):
             return super().observe()
