@@ -344,3 +344,52 @@ def test_advgame_list_shows_the_robosuite_family(capsys: pytest.CaptureFixture[s
     assert main(["list", "--family", "robosuite"]) == 0
     ids = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
     assert ids == advgame.list_scenarios("robosuite") and len(ids) == 12
+
+
+def _hold(obs: np.ndarray) -> np.ndarray:
+    """A stand-in protagonist: the zero (hold) command."""
+    return np.zeros(7)
+
+
+def test_payoff_table_of_the_arm_adversary(warm: None) -> None:
+    from advgame.adversaries import ConstantAdversary
+    from advgame.evaluation import EvalJob, evaluate
+
+    common = {
+        "scenario": "RS-MultiRobustDoor",
+        "make_kwargs": {"preset": "default", "max_episode_steps": 10},
+        "protagonist": "hold",
+        "protagonist_spec": _hold,
+        "seeds": (0,),
+    }
+    push = ConstantAdversary([1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    jobs = [
+        EvalJob(**common, adversary="nominal"),
+        EvalJob(**common, adversary="push", adversary_specs={"arm_adversary": push}),
+    ]
+    table = evaluate(jobs, workers=1, progress=False)
+    rows, columns, means = table.matrix()
+    assert list(rows) == ["hold"] and set(columns) == {"nominal", "push"}
+    assert np.all(np.isfinite(means))
+    [metrics] = table.metrics()
+    assert metrics["protagonist"] == "hold" and np.isfinite(metrics["worst"])
+
+
+def test_workspace_adversary_learns_one_decision_per_episode(
+    warm: None, one_torch_thread: None
+) -> None:
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_checker import check_env
+
+    from advgame.views import SingleAgentView
+
+    game = advgame.make("RS-Lift", preset="lift-causal", max_episode_steps=3)
+    view = SingleAgentView(game, "workspace_adversary", {"protagonist": _hold})
+    check_env(view, warn=False)
+    view.reset(seed=0)
+    _, reward, terminated, truncated, _ = view.step(np.array([1.0], dtype=np.float32))
+    assert truncated and not terminated  # one decision per episode: the whole episode inside
+    assert np.isfinite(reward) and reward < 0.0  # minus the protagonist's (positive) return
+    model = PPO("MlpPolicy", view, n_steps=8, batch_size=8, n_epochs=1, device="cpu", seed=0)
+    model.learn(16)  # a learned workspace adversary: 16 episodes, 16 decisions
+    assert model.num_timesteps == 16
