@@ -12,6 +12,8 @@ from typing import Any
 import numpy as np
 from robosuite.environments.manipulation.door import Door
 
+from advgame.errors import ConfigError
+
 __all__ = ["ROBOT_Y_OFFSETS", "MultiRobustDoor"]
 
 ROBOT_Y_OFFSETS = (-0.15, 0.25)
@@ -29,7 +31,10 @@ class MultiRobustDoor(Door):
     def __init__(self, robots: Any = ("Panda", "Panda"), **kwargs: Any) -> None:
         robots = [robots] * 2 if isinstance(robots, str) else list(robots)
         if len(robots) != 2:
-            raise ValueError(f"MultiRobustDoor needs exactly two robots, got {robots!r}.")
+            raise ConfigError(
+                f"MultiRobustDoor needs exactly two robots (protagonist, adversary arm), got "
+                f"{robots!r}; e.g. robots=['Panda', 'Panda']."
+            )
         super().__init__(robots=robots, **kwargs)
 
     def _load_model(self) -> None:
