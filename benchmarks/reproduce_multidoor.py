@@ -11,8 +11,10 @@ Each protagonist is then evaluated against the no-op arm and against the learned
 alternation run's final adversary of the same seed). Results: ``<out>/results.json`` and
 ``<out>/reproduction.md`` (mean ± half-width of a 95 % Student-t interval over seed means).
 
-Run: ``python benchmarks/reproduce_multidoor.py --seeds 3 --iterations 6 --out
-docs/reproduction-multidoor`` (about 30-40 minutes on 2 contended cores).
+Run: ``python benchmarks/reproduce_multidoor.py --out docs/reproduction-multidoor`` (the
+defaults: 3 seeds in 3 worker processes, 4 iterations of 1024 steps per side, 3 evaluation
+episodes per cell; about 40 minutes on the shared 2-core VM under a load average of ~12, and
+a few minutes on an idle 4-core machine).
 """
 
 from __future__ import annotations
@@ -128,10 +130,10 @@ def main() -> None:
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--iterations", type=int, default=6)
-    parser.add_argument("--steps", type=int, default=2048, help="steps per side per iteration")
-    parser.add_argument("--episodes", type=int, default=5, help="evaluation episodes per cell")
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--iterations", type=int, default=4)
+    parser.add_argument("--steps", type=int, default=1024, help="steps per side per iteration")
+    parser.add_argument("--episodes", type=int, default=3, help="evaluation episodes per cell")
+    parser.add_argument("--workers", type=int, default=3)
     parser.add_argument("--out", default="docs/reproduction-multidoor")
     args = parser.parse_args()
     out = Path(args.out)
