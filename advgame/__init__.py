@@ -34,6 +34,9 @@ _LAZY = {
     "DynamicsDisruptor": "advgame.disruptors",
     "ForceDisruptor": "advgame.disruptors",
     "Param": "advgame.disruptors",
+    "WorkspaceDisruptor": "advgame.disruptors",
+    "Shift": "advgame.disruptors",
+    "ArmDisruptor": "advgame.disruptors",
     "AgentInfo": "advgame.policy",
     "Policy": "advgame.policy",
     "PolicySpec": "advgame.policy",
@@ -49,11 +52,14 @@ __all__ = sorted(_LAZY)
 if TYPE_CHECKING:
     from advgame.disruptors import (
         ActionDisruptor,
+        ArmDisruptor,
         DynamicsDisruptor,
         ForceDisruptor,
         ObservationDisruptor,
         Param,
         RewardDisruptor,
+        Shift,
+        WorkspaceDisruptor,
     )
     from advgame.episodes import EpisodeResult, rollout
     from advgame.errors import AdvgameError

@@ -12,6 +12,11 @@ Agents are the task's protagonists plus one adversary per disruptor. One protago
    *observed* reward; every adversary receives ``-payoff``, the negative of the protagonists'
    *true* team payoff (``true_reward - cost_weight * true_cost``).
 
+Before the first step of an episode, workspace adversaries (reset-time disruptors such as
+`WorkspaceDisruptor`: table, door and object placement, colours) play a *setup move* of their own
+(a sense-kind move: reward 0, protagonists' actions ignored): they observe the nominal ``s_0``,
+edit the simulator, and everyone then observes the disturbed ``s_0``.
+
 Every agent submits an action on every move (the ParallelEnv contract); `Game.next_movers` says
 whose action the next move uses, and ``infos[agent]["acted"]`` says whose action counted in the
 move just made. Observations returned by an act move that is followed by a sense move are the
@@ -115,8 +120,10 @@ class Game(ParallelEnv):
             d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "stale"
         ]
         self._action_ds, self._reward_ds = by_hook["action"], by_hook["reward"]
-        self._model_ds = [d for d in by_hook["environment"] if getattr(d, "edits_model", False)]
-        self._data_ds = [d for d in by_hook["environment"] if not getattr(d, "edits_model", False)]
+        stepped = [d for d in by_hook["environment"] if not getattr(d, "at_reset", False)]
+        self._setup_ds = [d for d in by_hook["environment"] if getattr(d, "at_reset", False)]
+        self._model_ds = [d for d in stepped if getattr(d, "edits_model", False)]
+        self._data_ds = [d for d in stepped if not getattr(d, "edits_model", False)]
         self._env_ds = self._model_ds + self._data_ds
         self._act_ds = [*self._env_ds, *self._action_ds, *self._reward_ds, *self._stale]
         self._held_sensing = [d for d in self._sensing if d.schedule.hold]
@@ -135,6 +142,8 @@ class Game(ParallelEnv):
         self._true_obs: dict[str, Any] = {}
         self._shown: dict[str, Any] = {}
         self._state: Any = None
+        self._setup_pending = False
+        self._after_setup: tuple[str, frozenset[str]] = (ACT, frozenset())
 
     def agent_info(self, agent: str) -> AgentInfo:
         """Spaces (and disruptor) of `agent`, what a `PolicySpec` needs to build its policy."""
@@ -219,6 +228,7 @@ class Game(ParallelEnv):
         self.t = 0
         self.agents = list(self.possible_agents)
         self._last = {}
+        self._setup_pending = bool(self._setup_ds)
         self._begin_step(obs, pending=None)
         observations = {**self._shown, **dict.fromkeys(self.adversaries, self._state)}
         infos: dict[str, dict] = {a: {} for a in self.agents}
@@ -252,6 +262,21 @@ class Game(ParallelEnv):
             return self._sense(actions)
         return self._act(actions)
 
+    def _setup(self, actions: Mapping[str, Any]) -> Move:
+        """The setup move at t = 0: workspace adversaries edit the simulator, then it is re-observed."""
+        clipped: dict[str, int] = {}
+        sim = self.task.sim
+        for d in self._setup_ds:
+            if self._active[d.agent]:
+                u, clipped[d.agent] = d.decode(actions[d.agent])
+                self._last[d.agent] = u
+                d.environment(sim, u)
+        self._setup_pending = False
+        obs = self.task.observe()
+        self._true_obs, self._state, self._shown = obs, self.task.state(obs), dict(obs)
+        self.move, self.next_movers = self._after_setup
+        return Move(SENSE, clipped)
+
     def observe(self, agent: str) -> Any:
         """What `agent` observes now: protagonists the (perturbed) observation, adversaries ``s_t``."""
         return self._shown[agent] if agent in self._shown else self._state
@@ -275,6 +300,8 @@ class Game(ParallelEnv):
 
     # -- moves ------------------------------------------------------------------------------
     def _sense(self, actions: Mapping[str, Any]) -> Move:
+        if self._setup_pending:
+            return self._setup(actions)
         shown = self._shown  # the game's own dict (`_begin_step` built it; nobody else holds it)
         clipped: dict[str, int] = {}
         active = self._active
@@ -365,6 +392,12 @@ class Game(ParallelEnv):
             self.move, self.next_movers = SENSE, sense_movers
         else:
             self.move, self.next_movers = ACT, self._act_next
+        if self._setup_pending:  # t = 0: a setup move comes first, if a workspace adversary acts
+            setup = frozenset(d.agent for d in self._setup_ds if active[d.agent])
+            self._setup_pending = bool(setup)
+            if setup:
+                self._after_setup = (self.move, self.next_movers)
+                self.move, self.next_movers = SENSE, setup
 
     def _movers(self, active: Mapping[str, bool]) -> tuple[frozenset[str], frozenset[str]]:
         """Who moves in a step with these active disruptors: (sense move, act move)."""
@@ -379,12 +412,12 @@ class Game(ParallelEnv):
         return u
 
     def _restore_environment(self) -> None:
-        if not self._env_ds:
+        if not (self._env_ds or self._setup_ds):
             return
         sim = self.task.sim
         if not any(d.schedule.persist for d in self._env_ds):
             sim.restore_model()
-        for d in self._env_ds:
+        for d in self._setup_ds + self._env_ds:
             if not d.schedule.persist:
                 d.restore(sim)
 

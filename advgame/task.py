@@ -112,6 +112,12 @@ class MujocoSim:
             )
         return int(idx)
 
+    def body_moved(self, name: str, delta: Any) -> None:
+        """Hear that body `name` moved by `delta` (world frame); a no-op by default.
+
+        A task base can keep caches that depend on the body in step (robosuite's table offset).
+        """
+
     def recompile(self) -> None:
         """Compile `spec` (after edits) and swap it in, keeping qpos/qvel/act/time."""
         model, data = self.spec.recompile(self.model, self.data)
@@ -169,6 +175,17 @@ class TaskBase(abc.ABC):
     @abc.abstractmethod
     def state(self, observations: Mapping[str, Any]) -> Any:
         """The true global state adversaries observe, given the current true observations."""
+
+    def observe(self) -> dict[str, Any]:
+        """The protagonists' observations of the current simulator state, after an edit.
+
+        Reset-time (workspace) disruptors move things after the task's reset; the game then asks
+        for fresh observations. Tasks that cannot re-observe raise.
+        """
+        raise ConfigError(
+            f"{type(self).__name__} cannot re-observe its simulator; workspace disruptors need a "
+            "task base that can (robosuite tasks)."
+        )
 
     @property
     def sim(self) -> MujocoSim:
@@ -244,6 +261,17 @@ class GymTask(TaskBase):
     def state(self, observations: Mapping[str, Any]) -> Any:
         """The protagonist's true observation is the state."""
         return observations[self.AGENT]
+
+    def observe(self) -> dict[str, Any]:
+        """Re-observe a Gymnasium MuJoCo env after a simulator edit (its ``_get_obs``)."""
+        inner: Any = self.env.unwrapped
+        get_obs = getattr(inner, "_get_obs", None)
+        if get_obs is None or not hasattr(inner, "data"):
+            return super().observe()
+        import mujoco
+
+        mujoco.mj_forward(inner.model, inner.data)
+        return {self.AGENT: get_obs()}
 
     @property
     def sim(self) -> MujocoSim:

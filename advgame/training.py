@@ -154,7 +154,7 @@ def scaled(spec: Any, factor: float) -> Any:
     if factor == 1.0:
         return spec
     changes = {}
-    for name in ("eps", "max_force", "max_torque", "alpha"):
+    for name in ("eps", "max_force", "max_torque", "alpha", "scale"):
         if hasattr(spec, name):
             value = np.asarray(getattr(spec, name), dtype=float) * factor
             changes[name] = (

@@ -59,3 +59,33 @@ _gym("LunarLander-v3", "box2d", _BOX2D, "lander with four discrete engine action
 _gym("LunarLanderContinuous-v3", "box2d", _BOX2D, "lander with continuous throttles")
 # MaMuJoCo (gymnasium-robotics): one registry line per factorization, in mamujoco_list.py.
 _register_mamujoco()
+
+
+def _robosuite(env_name: str, description: str) -> None:
+    register(
+        ScenarioSpec(
+            id=f"RS-{env_name}",
+            task="advgame.scenarios.robosuite:make_task",
+            presets="advgame.scenarios.robosuite:presets",
+            task_kwargs={"env_name": env_name},
+            family="robosuite",
+            description=description,
+            extra="robosuite",
+            requires=("robosuite",),
+        )
+    )
+
+
+# robosuite 1.5 (no rendering; flattened proprio + object state): the paper's twelve tasks.
+_robosuite("Lift", "lift a cube (Panda)")
+_robosuite("Stack", "stack one cube on another (Panda)")
+_robosuite("NutAssembly", "fit two nuts on their pegs (Panda)")
+_robosuite("PickPlace", "put four objects in their bins (Panda)")
+_robosuite("Door", "open a door by its handle (Panda)")
+_robosuite("Wipe", "wipe markings off a table (Panda)")
+_robosuite("ToolHang", "hang a tool on a hook (Panda)")
+_robosuite("TwoArmLift", "lift a pot by its two handles (two Pandas)")
+_robosuite("TwoArmPegInHole", "insert a peg into a hole held by the other arm (two Pandas)")
+_robosuite("TwoArmHandover", "hand a hammer from one arm to the other (two Pandas)")
+_robosuite("TwoArmTransport", "move an object between two tables (two Pandas)")
+_robosuite("MultiRobustDoor", "open a door while an adversarial second arm impedes (two Pandas)")

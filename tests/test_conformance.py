@@ -25,6 +25,9 @@ from advgame.registry import scenario_spec
 SLOW = {"CarRacing-v3"}
 """Scenarios whose reset is expensive (CarRacing builds a track): fewer cycles."""
 
+SHORT_FAMILIES = {"robosuite"}
+"""Families whose steps are slow (robosuite: ~4-100 ms a step): short horizons in these tests."""
+
 CASES = [
     pytest.param(sid, name, id=f"{sid}:{name}")
     for sid in advgame.list_scenarios()
@@ -32,14 +35,18 @@ CASES = [
 ]
 
 
+def _short(sid: str) -> bool:
+    return sid in SLOW or scenario_spec(sid).family in SHORT_FAMILIES
+
+
 def _cycles(sid: str) -> int:
     """Moves per episode in PettingZoo's tests."""
-    return 30 if sid in SLOW else 200
+    return 20 if scenario_spec(sid).family in SHORT_FAMILIES else 30 if sid in SLOW else 200
 
 
 def _episode_steps(sid: str) -> int:
     """Protagonist steps per episode in the game checks (a truncation horizon for the task)."""
-    return 10 if sid in SLOW else 40
+    return 10 if _short(sid) else 40
 
 
 def _assert_same(a: Any, b: Any, where: str) -> None:
@@ -108,6 +115,11 @@ def test_spaces_cached_and_adversaries_bounded_boxes(sid: str, preset: str) -> N
     game.close()
 
 
+def _setup_move(game: advgame.Game, movers: frozenset[str]) -> bool:
+    """Whether `movers` are reset-time adversaries alone (they move first, once, at t = 0)."""
+    return all(getattr(game.disruptors[a], "at_reset", False) for a in movers)
+
+
 def _play_checked(game: advgame.Game, seed: int, horizon: int) -> list[tuple]:
     """One episode of random actions, checking zero-sum payoffs and `acted` on every move.
 
@@ -116,13 +128,16 @@ def _play_checked(game: advgame.Game, seed: int, horizon: int) -> list[tuple]:
     obs, infos = game.reset(seed=seed)
     _seed_spaces(game, seed)
     moves: list[tuple] = [(obs, infos)]
-    act_moves = 0
+    act_moves = setups = 0
     while game.agents:
         movers = game.next_movers
         assert movers, "a live game must say whose action the next move uses"
         assert movers <= set(game.agents)
         sense = not any(p in movers for p in game.protagonists)
-        if sense:  # only observation adversaries move on a sense move
+        if sense and game.t == 0 and _setup_move(game, movers):
+            setups += 1  # the setup move: only workspace (reset-time) adversaries, first, once
+            assert setups == 1 and len(moves) == 1, "one setup move, the episode's first"
+        elif sense:  # only observation adversaries move on a sense move
             assert all(game.disruptors[a].hook == "observation" for a in movers), movers
         else:
             assert set(game.protagonists) <= movers

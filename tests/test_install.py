@@ -129,7 +129,7 @@ job = EvalJob(scenario="Hopper-v5", protagonist="zero", protagonist_spec=lambda 
               adversary="nominal", seeds=(0,), make_kwargs={"preset": "default"})
 table = evaluate([job], workers=1, progress=False)
 errors = {}
-for sid in ("LunarLander-v3", "MA-HalfCheetah-2x3"):
+for sid in ("LunarLander-v3", "MA-HalfCheetah-2x3", "RS-Lift"):
     try:
         advgame.make(sid)
     except MissingExtraError as exc:
@@ -165,6 +165,7 @@ def test_core_wheel_alone_runs_in_a_fresh_venv(tmp_path: Path) -> None:
     assert out["steps"] > 0 and out["trained"] and out["rows"] == 1
     assert 'pip install "advgame[box2d]"' in out["errors"]["LunarLander-v3"]
     assert 'pip install "advgame[mamujoco]"' in out["errors"]["MA-HalfCheetah-2x3"]
+    assert 'pip install "advgame[robosuite]"' in out["errors"]["RS-Lift"]
     listing = subprocess.run(
         [str(env_dir / "bin" / "advgame"), "list", "LunarLander-v3", "Hopper-v5"],
         capture_output=True,

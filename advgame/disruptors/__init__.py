@@ -10,17 +10,20 @@ from collections.abc import Mapping
 from typing import Any
 
 from advgame.disruptors.action import ActionDisruptor
+from advgame.disruptors.arm import ArmDisruptor
 from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.disruptors.dynamics import DynamicsDisruptor, Param
 from advgame.disruptors.force import ForceDisruptor
 from advgame.disruptors.observation import ObservationDisruptor
 from advgame.disruptors.reward import RewardDisruptor
+from advgame.disruptors.workspace import Shift, WorkspaceDisruptor
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 from advgame.schedule import Schedule
 
 __all__ = [
     "KINDS",
     "ActionDisruptor",
+    "ArmDisruptor",
     "Disruptor",
     "DisruptorSpec",
     "DynamicsDisruptor",
@@ -28,6 +31,8 @@ __all__ = [
     "ObservationDisruptor",
     "Param",
     "RewardDisruptor",
+    "Shift",
+    "WorkspaceDisruptor",
     "from_config",
 ]
 
@@ -37,6 +42,8 @@ KINDS: dict[str, type[DisruptorSpec]] = {
     "reward": RewardDisruptor,
     "dynamics": DynamicsDisruptor,
     "force": ForceDisruptor,
+    "workspace": WorkspaceDisruptor,
+    "arm": ArmDisruptor,
 }
 """Disruptor kinds by name."""
 
@@ -66,6 +73,8 @@ def from_config(kind: str, config: Mapping[str, Any] | DisruptorSpec) -> Disrupt
         cfg["schedule"] = Schedule(**cfg["schedule"])
     if kind == "dynamics" and "params" in cfg:
         cfg["params"] = tuple(p if isinstance(p, Param) else Param(**p) for p in cfg["params"])
+    if kind == "workspace" and "shifts" in cfg:
+        cfg["shifts"] = tuple(s if isinstance(s, Shift) else Shift(**s) for s in cfg["shifts"])
     try:
         return KINDS[kind](**cfg)
     except TypeError as exc:

@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget, resolve_targets
-from advgame.errors import BudgetError, ConfigError
+from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
 if TYPE_CHECKING:
     from advgame.task import TaskBase
@@ -45,6 +45,10 @@ class ObservationDisruptor(DisruptorSpec):
     """Shape of the ball: per-dimension (``"linf"``) or Euclidean per target (``"l2"``)."""
     dims: Sequence[int] | None = None
     """Indices of the observation dimensions attacked (``None``: all)."""
+    keys: Sequence[str] | None = None
+    """Names of observation parts attacked, for tasks that flatten a dict observation and say
+    where each key lies (``task.observation_keys``, e.g. robosuite's ``"object-state"``);
+    exclusive with `dims`."""
     targets: Sequence[str] | None = None
     """Protagonists whose observations are perturbed (``None``: all; a subset is a partial attack)."""
     space: Literal["raw", "normalized"] = "raw"
@@ -64,6 +68,11 @@ class ObservationDisruptor(DisruptorSpec):
             raise ConfigError(f"space must be 'raw' or 'normalized', got {self.space!r}.")
         if self.timing not in ("sense", "stale"):
             raise ConfigError(f"timing must be 'sense' or 'stale', got {self.timing!r}.")
+        if self.keys is not None and (self.dims is not None or isinstance(self.keys, str)):
+            raise ConfigError(
+                f"keys must be a list of names and exclusive with dims, got keys={self.keys!r}, "
+                f"dims={self.dims!r}."
+            )
         if self.bounded:
             eps = np.asarray(self.eps, dtype=np.float64)
             as_budget(self.eps, eps.size if eps.ndim else 1, "ObservationDisruptor.eps")
@@ -79,13 +88,33 @@ class ObservationDisruptor(DisruptorSpec):
                     f"Observation of {t!r} is {space}; only Box observations can be perturbed."
                 )
             n = int(np.prod(space.shape))
-            idx = np.arange(n) if self.dims is None else np.asarray(self.dims, dtype=np.int64)
+            if self.keys is not None:
+                idx = _key_dims(task, self.keys)
+            else:
+                idx = np.arange(n) if self.dims is None else np.asarray(self.dims, dtype=np.int64)
             if idx.ndim != 1 or idx.size == 0 or idx.min() < 0 or idx.max() >= n:
                 raise BudgetError(
                     f"dims must be indices in [0, {n}) of {t!r}'s flattened observation, got {self.dims!r}."
                 )
             dims[t] = idx
         return ObservationRuntime(self, task, targets, dims)
+
+
+def _key_dims(task: TaskBase, keys: Sequence[str]) -> np.ndarray:
+    """The flattened indices of observation `keys` (the task's ``observation_keys`` slices)."""
+    table = getattr(task, "observation_keys", None)
+    if not table:
+        raise ConfigError(
+            f"{type(task).__name__} has no named observation keys; use dims=[...] instead of keys."
+        )
+    out = []
+    for k in keys:
+        if k not in table:
+            raise UnknownNameError(
+                f"No observation key {k!r}.{did_you_mean(k, table)} Keys: {list(table)}."
+            )
+        out.append(np.arange(table[k].start, table[k].stop))
+    return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
 class ObservationRuntime(AdditiveDisruptor):
