@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import logging
+import os
 import shutil
+import time
 from pathlib import Path
 from typing import Any
 
@@ -15,16 +18,8 @@ from advgame.learning import EpisodeStats, Side
 from advgame.policy import ConstantPolicy
 from advgame.population import Member, Population
 from advgame.registry import load, make
-from advgame.training import (
-    _ZERO,
-    PROTAGONISTS,
-    Trainer,
-    append_progress,
-    commit_folder,
-    learner_config,
-    now,
-    write_state,
-)
+from advgame.train_config import _ZERO, PROTAGONISTS, learner_config
+from advgame.trainer import Trainer
 from advgame.views import view_factory
 
 __all__ = ["Run"]
@@ -281,3 +276,44 @@ def _tensorboard(folder: Path) -> Any:
         log.warning("tensorboard is not importable; loop scalars go to progress.csv only")
         return None
     return SummaryWriter(str(folder))
+
+
+def write_state(run_dir: Path, state: dict[str, Any]) -> None:
+    """Write ``state.json`` atomically."""
+    tmp = run_dir / "state.json.tmp"
+    tmp.write_text(json.dumps(state, indent=2) + "\n")
+    os.replace(tmp, run_dir / "state.json")
+
+
+def append_progress(path: Path, row: dict[str, Any], keep_below: int | None = None) -> None:
+    """Append a row to the progress CSV; on resume drop rows of iterations >= `keep_below`."""
+    rows: list[dict[str, Any]] = []
+    if path.exists():
+        with path.open() as f:
+            rows = [
+                r
+                for r in csv.DictReader(f)
+                if keep_below is None or int(r["iteration"]) < keep_below
+            ]
+    rows.append(row)
+    fields = list(dict.fromkeys(k for r in rows for k in r))
+    tmp = path.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+    os.replace(tmp, path)
+
+
+def commit_folder(partial: Path) -> Path:
+    """Rename ``iter_NNNN.partial`` to ``iter_NNNN`` (replacing a stale one)."""
+    final = Path(str(partial).replace(".partial", ""))
+    if final.exists():
+        shutil.rmtree(final)
+    os.replace(partial, final)
+    return final
+
+
+def now() -> float:
+    """Wall clock for fps (monotonic)."""
+    return time.perf_counter()
