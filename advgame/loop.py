@@ -25,7 +25,6 @@ from advgame.views import view_factory
 __all__ = ["Run"]
 
 _TEAM_FACTORY = "advgame.team:team_factory"
-_TEAM_LEARNER = "advgame.agents.marl:TeamLearner"
 
 log = logging.getLogger(__name__)
 
@@ -103,6 +102,7 @@ class Run:
             "adversary_steps": sum(t.sides[a].steps for a in t.learned),
             "protagonist_phase_true_return": p_ret,
             "protagonist_phase_episodes": p_eps,
+            "protagonist_phase_true_cost": _mean(prot_stats.last_costs),
             "adversary_phase_true_return": a_ret,
             "adversary_phase_episodes": a_eps,
             "adversary_clipped": clips,
@@ -144,8 +144,10 @@ class Run:
         )
         game.close()
         return {
-            "eval_nominal_return": float(np.mean([r.true_return for r in nominal])),
-            "eval_attacked_return": float(np.mean([r.true_return for r in attacked])),
+            "eval_nominal_return": _mean([r.true_return for r in nominal]),
+            "eval_attacked_return": _mean([r.true_return for r in attacked]),
+            "eval_nominal_cost": _mean([r.cost for r in nominal]),
+            "eval_attacked_cost": _mean([r.cost for r in attacked]),
         }
 
     # -- building ---------------------------------------------------------------------------
@@ -229,6 +231,11 @@ class Run:
         return int(state["iteration"]) + 1
 
 
+def _mean(values: list[float]) -> float:
+    """The mean, or NaN for no values."""
+    return float(np.mean(values)) if values else float("nan")
+
+
 def _rebase(spec: Any, old: str, new: str, deterministic: bool | None = None) -> Any:
     """`spec` with file paths under `old` moved to `new` (and `deterministic` set, if given)."""
     from dataclasses import replace
@@ -243,7 +250,7 @@ def _rebase(spec: Any, old: str, new: str, deterministic: bool | None = None) ->
 
 def _load_team(folder: Path, learner: Any, fns: list[Any], tb: str) -> Any:
     """Rebuild a protagonist team learner saved in `folder` (resume)."""
-    return load(_TEAM_LEARNER).load(folder, learner, fns, tensorboard_log=tb)
+    return learner.load_learner(folder, fns, tensorboard_log=tb)
 
 
 class _NoBar:

@@ -206,7 +206,12 @@ def report_folder(folder: Path, scenario: str | None = None) -> Path:
     title = f"advgame robustness report: {scenario or table.rows[0].get('scenario', '')}".rstrip(
         ": "
     )
-    return write_report(folder, title, table, extra_sections=sections, figures=figures)
+    from advgame.report import runs_cost_limit
+
+    limit = runs_cost_limit(runs.values())
+    return write_report(
+        folder, title, table, extra_sections=sections, figures=figures, cost_limit=limit
+    )
 
 
 def _exploit_md(results: dict[str, dict[str, Any]]) -> str:

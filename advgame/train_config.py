@@ -18,12 +18,16 @@ from typing import Any, Literal
 from advgame.errors import ConfigError
 from advgame.registry import load
 
-__all__ = ["METHODS", "PROTAGONISTS", "TEAM_ALGOS", "TrainConfig", "learner_config"]
+__all__ = ["METHODS", "PROTAGONISTS", "SAFE_ALGOS", "TEAM_ALGOS", "TrainConfig", "learner_config"]
 
 _LEARNERS = "advgame.agents.sb3:LEARNERS"
 _TEAM_LEARNERS = "advgame.agents.marl:MARL_LEARNERS"
-TEAM_ALGOS = ("mappo", "ippo")
-"""Protagonist learners that train a whole team (MaMuJoCo) instead of one SB3 agent."""
+_SAFE_LEARNERS = "advgame.agents.safe:SAFE_LEARNERS"
+SAFE_ALGOS = ("ppo-lag", "crpo", "pcrpo")
+"""Constrained protagonist learners (safe scenarios): PPO-Lagrangian, CRPO, PCRPO."""
+TEAM_ALGOS = ("mappo", "ippo", *SAFE_ALGOS)
+"""Protagonist learners that train the whole protagonist team on `advgame.team.TeamView`s
+(our torch learners) instead of one SB3 agent."""
 PROTAGONISTS = "protagonists"
 """The key of the protagonist side in `Trainer.sides` (one agent or a whole team)."""
 _ZERO = "advgame.adversaries.noise:ZeroAdversary"
@@ -32,9 +36,19 @@ METHODS: dict[str, dict[str, Any]] = {
     "ppo": {"preset": "default", "learned": [], "train_budget_scale": 1.0},
     "atla": {"preset": "atla", "learned": None, "train_budget_scale": 1.0},
     "rarl": {"preset": "rarl", "learned": None, "train_budget_scale": 0.5},
+    **{
+        algo: {
+            "preset": "default",
+            "learned": [],
+            "train_budget_scale": 1.0,
+            "protagonist_algo": algo,
+        }
+        for algo in SAFE_ALGOS
+    },
 }
 """Named starting points: plain PPO on the nominal task, ATLA (learned observation attack in
-normalized units) and RARL (learned forces, trained at half the bound, tested at full)."""
+normalized units), RARL (learned forces, trained at half the bound, tested at full), and the
+constrained learners on a safe scenario (``--preset`` picks the in-training disruption)."""
 
 
 @dataclass(frozen=True)
@@ -48,8 +62,11 @@ class TrainConfig:
     learned: list[str] | None = None
     """Adversary agents trained in the adversary phase (None: every adversary the preset gives
     no fixed policy; []: none, i.e. plain training against fixed or no-op adversaries)."""
-    protagonist_algo: Literal["ppo", "sac", "td3", "mappo", "ippo"] = "ppo"
-    """Protagonist learner: SB3 PPO/SAC/TD3 for one protagonist, MAPPO/IPPO for a team."""
+    protagonist_algo: Literal["ppo", "sac", "td3", "mappo", "ippo", "ppo-lag", "crpo", "pcrpo"] = (
+        "ppo"
+    )
+    """Protagonist learner: SB3 PPO/SAC/TD3 for one protagonist, MAPPO/IPPO for a team, or a
+    constrained learner (PPO-Lagrangian, CRPO, PCRPO) on a safe scenario."""
     adversary_algo: Literal["ppo", "sac"] = "ppo"
     """Learner of each learned adversary."""
     protagonist_hparams: dict[str, Any] | None = None
@@ -124,7 +141,9 @@ def learner_config(algo: str, overrides: dict[str, Any] | None) -> Any:
     """The learner config of `algo` with `overrides` applied (unknown names are an error)."""
     from advgame.config import from_dict, to_dict
 
-    learners = {**load(_LEARNERS), **(load(_TEAM_LEARNERS) if algo in TEAM_ALGOS else {})}
+    learners = {**load(_LEARNERS)}
+    if algo in TEAM_ALGOS:
+        learners.update(load(_SAFE_LEARNERS if algo in SAFE_ALGOS else _TEAM_LEARNERS))
     if algo not in learners:
         raise ConfigError(f"Unknown learner {algo!r}; expected one of {sorted(learners)}.")
     base = learners[algo]()
