@@ -230,3 +230,55 @@ def test_a_constrained_run_killed_by_sigkill_resumes_to_the_end(tmp_path: Path) 
     }
     rows = (run / "progress.csv").read_text().splitlines()
     assert len(rows) == iterations + 1 and "protagonist_phase_true_cost" in rows[0]
+
+
+def test_learned_adversaries_train_against_a_constrained_protagonist(tmp_path: Path) -> None:
+    from advgame.population import Population
+    from advgame.training import TrainConfig, train
+
+    cfg = TrainConfig(
+        scenario=REACHER,
+        preset="default",
+        learned=None,  # observation, action and cost adversaries, all learned
+        protagonist_algo="crpo",
+        protagonist_hparams={"n_steps": 100, "cost_limit": 10.0},
+        adversary_hparams={"n_steps": 128},
+        iterations=1,
+        protagonist_steps=100,
+        adversary_steps=128,
+        eval_episodes=1,
+    )
+    run = train(cfg, tmp_path / "run", progress=False)
+    pop = Population.load(run / "population.json")
+    learned = {m.agent for m in pop if m.learned}
+    assert learned == {"observation_adversary", "action_adversary", "cost_adversary"}
+    row = (run / "progress.csv").read_text().splitlines()
+    header, values = row[0].split(","), row[1].split(",")
+    cost = float(values[header.index("eval_attacked_cost")])
+    assert 0.0 <= cost <= 50.0  # a 50-step episode costs at most 1 per step
+
+
+def test_the_report_gains_episode_cost_and_constraint_satisfaction(tmp_path: Path) -> None:
+    from advgame.evaluation import AdversarySetup, evaluate, population_jobs
+    from advgame.report import write_report
+
+    def spin(obs: Any) -> list[float]:  # full torque: the fingertip exceeds the speed limit
+        return [1.0, 1.0]
+
+    setups = {
+        "nominal": AdversarySetup.nominal(),
+        "cost-0.3": AdversarySetup.from_preset(REACHER, "cost-gauss-0.3"),
+    }
+    jobs = population_jobs(
+        REACHER, {"spin": spin, "still": lambda obs: [0.0, 0.0]}, setups, seeds=(0, 1)
+    )
+    table = evaluate(jobs, workers=1, progress=False)
+    rows = {(r["protagonist"], r["adversary"]): r for r in table.safety(limit=10.0)}
+    costs = table.values("spin", "nominal", "cost")
+    assert rows["spin", "nominal"]["cost"] == pytest.approx(costs.mean())
+    assert rows["spin", "nominal"]["satisfied"] == pytest.approx(np.mean(costs <= 10.0))
+    assert rows["spin", "nominal"]["satisfied"] < 1.0 and rows["still", "nominal"]["cost"] == 0.0
+    assert rows["still", "cost-0.3"]["satisfied"] == 1.0  # observed-cost noise is not true cost
+    report = write_report(tmp_path, "safe", table, cost_limit=10.0).read_text()
+    assert "## Safety" in report and "satisfied" in report
+    assert (tmp_path / "safety.png").stat().st_size > 0
