@@ -222,18 +222,19 @@ def plot_safety(table: PayoffTable, path: str | Path, limit: float) -> Path:
 
 def runs_cost_limit(run_dirs: Iterable[str | Path]) -> float | None:
     """The cost limit the runs' constrained learners trained with (the smallest), if any."""
+    import json
+
     limits = []
     for d in run_dirs:
-        cfg = Path(d) / "config.json"
-        if cfg.exists():
-            import json
-
-            hparams = json.loads(cfg.read_text()).get("protagonist_hparams") or {}
-            algo = json.loads(cfg.read_text()).get("protagonist_algo")
-            if "cost_limit" in hparams:
-                limits.append(float(hparams["cost_limit"]))
-            elif algo in ("ppo-lag", "crpo", "pcrpo"):
-                limits.append(DEFAULT_COST_LIMIT)
+        path = Path(d) / "config.json"
+        if not path.exists():
+            continue
+        cfg = json.loads(path.read_text())
+        hparams = cfg.get("protagonist_hparams") or {}
+        if "cost_limit" in hparams:
+            limits.append(float(hparams["cost_limit"]))
+        elif cfg.get("protagonist_algo") in ("ppo-lag", "crpo", "pcrpo"):
+            limits.append(DEFAULT_COST_LIMIT)
     return min(limits) if limits else None
 
 

@@ -282,3 +282,34 @@ def test_the_report_gains_episode_cost_and_constraint_satisfaction(tmp_path: Pat
     report = write_report(tmp_path, "safe", table, cost_limit=10.0).read_text()
     assert "## Safety" in report and "satisfied" in report
     assert (tmp_path / "safety.png").stat().st_size > 0
+
+
+def test_save_and_load_restore_the_multiplier_and_the_learner(tmp_path: Path) -> None:
+    cfg = PPOLagConfig(n_steps=100, batch_size=50, cost_limit=1.0, multiplier_lr=0.5)
+    fns = [team_factory(REACHER, preset="default")]
+    learner = cfg.make_learner(fns, 0, 400)
+    learner.learn(200)
+    assert learner.multiplier is not None and learner.multiplier > cfg.multiplier_init
+    learner.save(tmp_path)
+    back = cfg.load_learner(tmp_path, fns)
+    assert back.multiplier == learner.multiplier and back.episode_cost == learner.episode_cost
+    assert back.steps == learner.steps == 200
+    a, b = learner.model.state_dict(), back.model.state_dict()
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    back.learn(100)  # and it trains on
+    assert back.steps == 300
+
+
+def test_the_report_limit_comes_from_the_runs_learner_configs(tmp_path: Path) -> None:
+    from advgame.report import DEFAULT_COST_LIMIT, runs_cost_limit
+
+    for name, cfg in {
+        "tight": {"protagonist_algo": "crpo", "protagonist_hparams": {"cost_limit": 4.0}},
+        "omnisafe": {"protagonist_algo": "ppo-lag", "protagonist_hparams": None},
+        "plain": {"protagonist_algo": "ppo", "protagonist_hparams": None},
+    }.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "config.json").write_text(json.dumps(cfg))
+    assert runs_cost_limit([tmp_path / "tight", tmp_path / "omnisafe"]) == 4.0
+    assert runs_cost_limit([tmp_path / "omnisafe"]) == DEFAULT_COST_LIMIT
+    assert runs_cost_limit([tmp_path / "plain"]) is None
