@@ -32,6 +32,8 @@ _ACTOR_SPEC = "advgame.agents.marl_nets:TorchActorCheckpoint"
 
 RANDOM = ("state-gauss-0.1", "state-gauss-0.15", "state-uniform-0.2-0.8", "action-gauss-0.1")
 """Random-mode presets evaluated when the scenario has them (the paper's settings)."""
+SAFE_RANDOM = ("action-gauss-0.15", "action-gauss-0.3", "cost-gauss-0.15", "cost-gauss-0.3")
+"""The paper's safe-RL settings, evaluated on safe scenarios (action and observed-cost noise)."""
 SCHEDULED = ("shift-sinusoid", "state-gauss-0.1-100F")
 """The first of these the scenario has is its scheduled column."""
 SCHEDULE_EPISODES = 8
@@ -73,6 +75,9 @@ def _adversary_columns(
     presets = scenario_spec(scenario).load_presets()
     cols: dict[str, AdversarySetup] = {"nominal": AdversarySetup.nominal()}
     for name in RANDOM:
+        if name in presets:
+            cols[f"random {name}"] = AdversarySetup.from_preset(scenario, name)
+    for name in SAFE_RANDOM if scenario_spec(scenario).family == "safe" else ():
         if name in presets:
             cols[f"random {name}"] = AdversarySetup.from_preset(scenario, name)
     for name in SCHEDULED:

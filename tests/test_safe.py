@@ -313,3 +313,31 @@ def test_the_report_limit_comes_from_the_runs_learner_configs(tmp_path: Path) ->
     assert runs_cost_limit([tmp_path / "tight", tmp_path / "omnisafe"]) == 4.0
     assert runs_cost_limit([tmp_path / "omnisafe"]) == DEFAULT_COST_LIMIT
     assert runs_cost_limit([tmp_path / "plain"]) is None
+
+
+def test_advgame_evaluate_reports_cost_under_the_papers_safe_settings(tmp_path: Path) -> None:
+    from advgame.training import TrainConfig, train
+
+    runs = []
+    for algo in ("crpo", "pcrpo"):
+        cfg = TrainConfig(
+            scenario=REACHER,
+            preset="default",
+            learned=[],
+            protagonist_algo=algo,  # type: ignore[arg-type]
+            protagonist_hparams={"n_steps": 64, "cost_limit": 7.0},
+            iterations=1,
+            protagonist_steps=64,
+            adversary_steps=0,
+            eval_episodes=0,
+        )
+        runs.append(str(train(cfg, tmp_path / algo, progress=False)))
+    out = tmp_path / "results"
+    argv = ["evaluate", *runs, "--out", str(out), "--seeds", "1", "--workers", "1"]
+    assert advgame.cli.main(argv) == 0
+    table = PayoffTable.from_csv(out / "payoff.csv")
+    assert {"random action-gauss-0.3", "random cost-gauss-0.3"} <= set(table.adversaries)
+    report = (out / "report.md").read_text()
+    assert "## Safety" in report and "cost ≤ 7)" in report
+    for row in table.safety(7.0):
+        assert 0.0 <= row["satisfied"] <= 1.0 and 0.0 <= row["cost"] <= 50.0
