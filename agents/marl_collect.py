@@ -74,7 +74,7 @@ class TeamCollector:
         self.costs = np.zeros(len(self.envs), np.float32)
         """The cost each view's first protagonist observed on the last step (after disruptors)."""
         self.finished_costs: list[float] = []
-        """Observed cost of each episode finished since the learner last read it."""
+        """Observed cost of each episode finished in the last rollout (`collect`)."""
         self.cut: dict[int, tuple[Any, Any]] = {}
         """Views truncated on the last step: their final normalized observations and state."""
 
@@ -103,6 +103,7 @@ class TeamCollector:
         Returns the rollout with its advantages and returns, ready for `ppo_update`.
         """
         cfg, n_envs = self.config, len(self.envs)
+        self.finished_costs.clear()
         if self.obs is None:
             self.reset()
         net = model.snapshot()

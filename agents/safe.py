@@ -237,10 +237,9 @@ class SafeLearner(TeamLearner):
             )
             data = self.collector.collect(self.model, self.generator, stats)
             self.steps += cfg.n_steps * len(self.envs)
-            finished = self.collector.finished_costs
+            finished = self.collector.finished_costs  # this rollout's episodes
             if finished:
                 self.episode_cost = float(np.mean(finished))
-                finished.clear()
             way = cfg.direction(self.episode_cost, self.algo_state)
             for group in self.optimizer.param_groups:
                 group["lr"] = lr

@@ -81,6 +81,7 @@ class SafeCollector(TeamCollector):
     ) -> SafeTrainData:
         """``n_steps`` synchronous steps of every view; reward and cost advantages."""
         cfg, n_envs, n = self.config, len(self.envs), len(self.agents)
+        self.finished_costs.clear()
         if self.obs is None:
             self.reset()
         net, cost_net = model.snapshot(), model.numpy_cost_values()
