@@ -51,6 +51,7 @@ __all__ = [
     "COLUMN_KINDS",
     "DEFAULT_COLUMNS",
     "RANDOM",
+    "SAFE_RANDOM",
     "SCHEDULED",
     "ColumnContext",
     "adversary_columns",
@@ -60,6 +61,9 @@ __all__ = [
 
 RANDOM = ("state-gauss-0.1", "state-gauss-0.15", "state-uniform-0.2-0.8", "action-gauss-0.1")
 """Random-mode presets of the ``random`` kind, where the scenario has them (the paper's)."""
+SAFE_RANDOM = ("action-gauss-0.15", "action-gauss-0.3", "cost-gauss-0.15", "cost-gauss-0.3")
+"""Added to ``random`` on safe scenarios: the paper's safe-RL settings (action and observed-cost
+noise)."""
 SCHEDULED = ("shift-sinusoid", "state-gauss-0.1-100F")
 """The first of these the scenario has is the ``scheduled`` column."""
 DEFAULT_COLUMNS = ("nominal", "random", "scheduled", "learned")
@@ -103,9 +107,11 @@ def _preset(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, 
 def _random(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
     from advgame.registry import scenario_spec
 
-    presets = scenario_spec(ctx.scenario).load_presets()
+    spec = scenario_spec(ctx.scenario)
+    presets = spec.load_presets()
+    names = RANDOM + (SAFE_RANDOM if spec.family == "safe" else ())
     return {
-        f"random {n}": AdversarySetup.from_preset(ctx.scenario, n) for n in RANDOM if n in presets
+        f"random {n}": AdversarySetup.from_preset(ctx.scenario, n) for n in names if n in presets
     }
 
 

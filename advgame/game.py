@@ -78,6 +78,12 @@ class Game(ParallelEnv):
         """The `Preset` the game was made from, if any (set by `advgame.make`)."""
         if not np.isfinite(cost_weight) or cost_weight < 0:
             raise ConfigError(f"cost_weight must be finite and >= 0, got {cost_weight!r}.")
+        if cost_weight > 0 and not getattr(task, "has_cost", False):
+            raise ConfigError(
+                f"cost_weight={cost_weight!r}, but {type(task).__name__} "
+                f"{scenario_id or ''} computes no cost; use a safe scenario "
+                "(advgame.list_scenarios(family='safe')) or leave cost_weight at 0."
+            )
         self.cost_weight = float(cost_weight)
         self.protagonists: tuple[str, ...] = tuple(task.protagonists)
         self.disruptors: dict[str, Disruptor] = {}

@@ -36,7 +36,11 @@ class EpisodeStats:
     def __init__(self, progress: Any = None) -> None:
         self.progress = progress
         self.true_returns: list[float] = []
+        self.true_costs: list[float] = []
+        """True episode costs (recorded by learners on tasks with a cost)."""
         self.clipped = 0
+        self.last_costs: list[float] = []
+        """The true episode costs of the last `pop`."""
 
     def callback(self) -> Any:
         """A fresh SB3 `BaseCallback` feeding this recorder."""
@@ -47,15 +51,18 @@ class EpisodeStats:
         class _Callback(BaseCallback):
             def _init_callback(self) -> None:
                 self._acc = np.zeros(self.training_env.num_envs)
+                self._cost = np.zeros(self.training_env.num_envs)
 
             def _on_step(self) -> bool:
                 infos, dones = self.locals["infos"], self.locals["dones"]
                 for i, info in enumerate(infos):
                     self._acc[i] += info.get("true_reward", 0.0)
+                    self._cost[i] += info.get("true_cost", 0.0)
                     stats.clipped += int(info.get("clipped", 0))
                     if dones[i]:
                         stats.true_returns.append(float(self._acc[i]))
-                        self._acc[i] = 0.0
+                        stats.true_costs.append(float(self._cost[i]))
+                        self._acc[i] = self._cost[i] = 0.0
                 if stats.progress is not None:
                     stats.progress.update(len(infos))
                 return True
@@ -66,6 +73,7 @@ class EpisodeStats:
         """Mean true return of finished episodes, episode count and clips since the last pop."""
         values, clipped = self.true_returns, self.clipped
         self.true_returns, self.clipped = [], 0
+        self.last_costs, self.true_costs = self.true_costs, []
         return (float(np.mean(values)) if values else float("nan")), len(values), clipped
 
 

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import logging
+import os
 import shutil
+import time
 from pathlib import Path
 from typing import Any
 
@@ -15,22 +18,13 @@ from advgame.learning import EpisodeStats, Side
 from advgame.policy import ConstantPolicy
 from advgame.population import Member, Population
 from advgame.registry import load, make
-from advgame.training import (
-    _ZERO,
-    PROTAGONISTS,
-    Trainer,
-    append_progress,
-    commit_folder,
-    learner_config,
-    now,
-    write_state,
-)
+from advgame.train_config import _ZERO, PROTAGONISTS, learner_config
+from advgame.trainer import Trainer
 from advgame.views import view_factory
 
 __all__ = ["Run"]
 
 _TEAM_FACTORY = "advgame.team:team_factory"
-_TEAM_LEARNER = "advgame.agents.marl:TeamLearner"
 
 log = logging.getLogger(__name__)
 
@@ -108,6 +102,7 @@ class Run:
             "adversary_steps": sum(t.sides[a].steps for a in t.learned),
             "protagonist_phase_true_return": p_ret,
             "protagonist_phase_episodes": p_eps,
+            "protagonist_phase_true_cost": _mean(prot_stats.last_costs),
             "adversary_phase_true_return": a_ret,
             "adversary_phase_episodes": a_eps,
             "adversary_clipped": clips,
@@ -149,8 +144,10 @@ class Run:
         )
         game.close()
         return {
-            "eval_nominal_return": float(np.mean([r.true_return for r in nominal])),
-            "eval_attacked_return": float(np.mean([r.true_return for r in attacked])),
+            "eval_nominal_return": _mean([r.true_return for r in nominal]),
+            "eval_attacked_return": _mean([r.true_return for r in attacked]),
+            "eval_nominal_cost": _mean([r.cost for r in nominal]),
+            "eval_attacked_cost": _mean([r.cost for r in attacked]),
         }
 
     # -- building ---------------------------------------------------------------------------
@@ -234,6 +231,11 @@ class Run:
         return int(state["iteration"]) + 1
 
 
+def _mean(values: list[float]) -> float:
+    """The mean, or NaN for no values."""
+    return float(np.mean(values)) if values else float("nan")
+
+
 def _rebase(spec: Any, old: str, new: str, deterministic: bool | None = None) -> Any:
     """`spec` with file paths under `old` moved to `new` (and `deterministic` set, if given)."""
     from dataclasses import replace
@@ -248,7 +250,7 @@ def _rebase(spec: Any, old: str, new: str, deterministic: bool | None = None) ->
 
 def _load_team(folder: Path, learner: Any, fns: list[Any], tb: str) -> Any:
     """Rebuild a protagonist team learner saved in `folder` (resume)."""
-    return load(_TEAM_LEARNER).load(folder, learner, fns, tensorboard_log=tb)
+    return learner.load_learner(folder, fns, tensorboard_log=tb)
 
 
 class _NoBar:
@@ -281,3 +283,44 @@ def _tensorboard(folder: Path) -> Any:
         log.warning("tensorboard is not importable; loop scalars go to progress.csv only")
         return None
     return SummaryWriter(str(folder))
+
+
+def write_state(run_dir: Path, state: dict[str, Any]) -> None:
+    """Write ``state.json`` atomically."""
+    tmp = run_dir / "state.json.tmp"
+    tmp.write_text(json.dumps(state, indent=2) + "\n")
+    os.replace(tmp, run_dir / "state.json")
+
+
+def append_progress(path: Path, row: dict[str, Any], keep_below: int | None = None) -> None:
+    """Append a row to the progress CSV; on resume drop rows of iterations >= `keep_below`."""
+    rows: list[dict[str, Any]] = []
+    if path.exists():
+        with path.open() as f:
+            rows = [
+                r
+                for r in csv.DictReader(f)
+                if keep_below is None or int(r["iteration"]) < keep_below
+            ]
+    rows.append(row)
+    fields = list(dict.fromkeys(k for r in rows for k in r))
+    tmp = path.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+    os.replace(tmp, path)
+
+
+def commit_folder(partial: Path) -> Path:
+    """Rename ``iter_NNNN.partial`` to ``iter_NNNN`` (replacing a stale one)."""
+    final = Path(str(partial).replace(".partial", ""))
+    if final.exists():
+        shutil.rmtree(final)
+    os.replace(partial, final)
+    return final
+
+
+def now() -> float:
+    """Wall clock for fps (monotonic)."""
+    return time.perf_counter()

@@ -229,6 +229,36 @@ class PayoffTable:
             rows.append({**row, "adversaries": len(means), "episodes": int(pooled.size)})
         return rows
 
+    @property
+    def has_cost(self) -> bool:
+        """Whether any episode incurred a true cost (a safe scenario was evaluated)."""
+        return any(float(r.get("cost", 0.0) or 0.0) != 0.0 for r in self.rows)
+
+    def safety(self, limit: float) -> list[dict[str, Any]]:
+        """Per played cell: mean true return and episode cost, and constraint satisfaction.
+
+        ``cost`` is the mean true episode cost and ``cost_ci95`` its 95 % half-width over
+        per-seed means; ``satisfied`` is the share of episodes with cost ≤ `limit`.
+        """
+        if isinstance(limit, bool) or not isinstance(limit, (int, float)) or not limit >= 0:
+            raise ConfigError(f"A cost limit must be a number >= 0, got {limit!r} (e.g. 25).")
+        out = []
+        for p, a in itertools.product(self.protagonists, self.adversaries):
+            sel = [r for r in self.rows if r["protagonist"] == p and r["adversary"] == a]
+            if not sel:
+                continue
+            costs = np.array([float(r.get("cost", 0.0)) for r in sel])
+            by_seed: dict[Any, list[float]] = {}
+            for r, c in zip(sel, costs, strict=True):
+                by_seed.setdefault(r["seed"], []).append(c)
+            row = {"protagonist": p, "adversary": a, "episodes": len(sel)}
+            row["return"] = float(np.mean([float(r["true_return"]) for r in sel]))
+            row["cost"] = float(costs.mean())
+            row["cost_ci95"] = ci95([float(np.mean(v)) for v in by_seed.values()])
+            row["satisfied"] = float(np.mean(costs <= limit))
+            out.append(row)
+        return out
+
     def to_csv(self, path: str | Path) -> Path:
         """Write the rows as CSV (`columns` order; missing tags left empty); return the path."""
         path = Path(path)

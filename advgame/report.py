@@ -23,12 +23,18 @@ from advgame.errors import ConfigError
 from advgame.evaluation import NOMINAL, PayoffTable, ci95
 
 __all__ = [
+    "DEFAULT_COST_LIMIT",
     "adversary_listing",
     "plot_budget_curve",
     "plot_heatmap",
+    "plot_safety",
     "plot_training_curves",
+    "runs_cost_limit",
     "write_report",
 ]
+
+DEFAULT_COST_LIMIT = 25.0
+"""The episode-cost limit of the safety section when none is given (OmniSafe's default)."""
 
 log = logging.getLogger(__name__)
 
@@ -188,6 +194,64 @@ def plot_training_curves(
     return _save(fig, path)
 
 
+def plot_safety(table: PayoffTable, path: str | Path, limit: float) -> Path:
+    """Draw each cell's mean episode cost (x, 95 % CI) against its mean true return; save it.
+
+    One marker per protagonist, one point per adversary; the dashed line is the cost `limit`.
+    """
+    plt = _pyplot()
+    rows = table.safety(limit)
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for k, p in enumerate(table.protagonists):
+        mine = [r for r in rows if r["protagonist"] == p]
+        err = [0.0 if math.isnan(r["cost_ci95"]) else r["cost_ci95"] for r in mine]
+        ax.errorbar(
+            [r["cost"] for r in mine],
+            [r["return"] for r in mine],
+            xerr=err,
+            fmt="osD^v"[k % 5],
+            label=p,
+            capsize=3,
+        )
+        for r in mine:
+            ax.annotate(r["adversary"], (r["cost"], r["return"]), fontsize=7)
+    ax.axvline(limit, color="k", linestyle="--", linewidth=1, label=f"limit {limit:g}")
+    ax.set(xlabel="mean true episode cost", ylabel="mean true return")
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def runs_cost_limit(run_dirs: Iterable[str | Path]) -> float | None:
+    """The cost limit the runs' constrained learners trained with (the smallest), if any."""
+    import json
+
+    limits = []
+    for d in run_dirs:
+        path = Path(d) / "config.json"
+        if not path.exists():
+            continue
+        cfg = json.loads(path.read_text())
+        hparams = cfg.get("protagonist_hparams") or {}
+        if "cost_limit" in hparams:
+            limits.append(float(hparams["cost_limit"]))
+        elif cfg.get("protagonist_algo") in ("ppo-lag", "crpo", "pcrpo"):
+            limits.append(DEFAULT_COST_LIMIT)
+    return min(limits) if limits else None
+
+
+def _safety_section(table: PayoffTable, out: Path, limit: float) -> tuple[str, Path]:
+    rows = [
+        [r["protagonist"], r["adversary"], r["return"], r["cost"], r["cost_ci95"], r["satisfied"]]
+        for r in table.safety(limit)
+    ]
+    header = ["protagonist", "adversary", "return", "episode cost", "cost ±95 %", "satisfied"]
+    body = (
+        f"True episode cost and constraint satisfaction (share of episodes with cost ≤ "
+        f"{limit:g}) beside the true return, under each adversary.\n\n" + _md_table(header, rows)
+    )
+    return body, plot_safety(table, out / "safety.png", limit)
+
+
 def _fmt(v: Any) -> str:
     if isinstance(v, float):
         return "–" if math.isnan(v) else f"{v:.4g}"
@@ -222,12 +286,15 @@ def write_report(
     figures: Mapping[str, str | Path] | None = None,
     alpha: float = 0.1,
     nominal: str = NOMINAL,
+    cost_limit: float | None = None,
 ) -> Path:
     """Write ``report.md`` (metrics, payoff matrix, figures, method) and the data into `out_dir`.
 
     Also writes ``payoff.csv``, ``payoff.json`` and ``heatmap.png`` there. `figures` maps
     captions to further image files to link; `extra_sections` maps headings to Markdown.
-    Returns the path of ``report.md``.
+    When a cost limit is given or any episode had a cost, a safety section (episode cost and
+    constraint satisfaction per cell, `DEFAULT_COST_LIMIT` if no limit is given) and
+    ``safety.png`` are added. Returns the path of ``report.md``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -251,6 +318,10 @@ def write_report(
         "Mean true return ± 95 % CI over seeds.",
         _md_table(["", *adv], matrix_rows),
     ]
+    if cost_limit is not None or table.has_cost:
+        limit = DEFAULT_COST_LIMIT if cost_limit is None else cost_limit
+        body, figs["return vs episode cost"] = _safety_section(table, out, limit)
+        parts += ["## Safety", body]
     parts += ["## Figures"] + [f"![{c}]({_rel(p, out)})" for c, p in figs.items()]
     parts += ["Data: [payoff.csv](payoff.csv), [payoff.json](payoff.json)."]
     for heading, body in (extra_sections or {}).items():

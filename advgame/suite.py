@@ -165,9 +165,14 @@ def _threat_md(record: Mapping[str, Any]) -> str:
 
 def _write_runs(out: Path, runs: Mapping[str, Path]) -> None:
     """``runs.json``: each run's path relative to `out`, its progress CSV copied into `out`."""
-    entries = {}
+    from advgame.report import runs_cost_limit
+
+    entries: dict[str, dict[str, Any]] = {}
     for name, run_dir in runs.items():
-        entry = {"path": _relpath(run_dir, out)}
+        entry: dict[str, Any] = {"path": _relpath(run_dir, out)}
+        limit = runs_cost_limit([run_dir])
+        if limit is not None:  # a constrained learner's limit: the report's safety section
+            entry["cost_limit"] = limit
         if (run_dir / "progress.csv").is_file():
             copy = out / "progress" / f"{name}.csv"
             copy.parent.mkdir(exist_ok=True)
@@ -328,7 +333,18 @@ def report_folder(folder: Path, scenario: str | None = None) -> Path:
     title = f"advgame robustness report: {scenario or table.rows[0].get('scenario', '')}".rstrip(
         ": "
     )
-    return write_report(folder, title, table, extra_sections=sections, figures=figures)
+    return write_report(
+        folder, title, table, extra_sections=sections, figures=figures, cost_limit=_cost_limit(runs)
+    )
+
+
+def _cost_limit(runs: Mapping[str, Mapping[str, Any]]) -> float | None:
+    """The smallest cost limit the runs' constrained learners trained with, or None.
+
+    `_write_runs` records each run's limit in ``runs.json``, so a moved folder keeps it.
+    """
+    limits = [float(e["cost_limit"]) for e in runs.values() if "cost_limit" in e]
+    return min(limits) if limits else None
 
 
 def _exploit_md(results: dict[str, dict[str, Any]]) -> str:

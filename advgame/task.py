@@ -163,6 +163,8 @@ class TaskBase(abc.ABC):
     """The space of the true global state that adversaries observe."""
     max_episode_steps: int | None = None
     """Truncation horizon, if the task has one."""
+    has_cost: bool = False
+    """Whether the task computes a safety cost (a cost weight needs one)."""
 
     @abc.abstractmethod
     def reset(self, seed: int | None) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -219,6 +221,7 @@ class GymTask(TaskBase):
         self.env = gym.make(env_id, **kwargs)
         self.env_id = env_id
         self.cost_key = cost_key
+        self.has_cost = self.has_cost or cost_key is not None
         self.protagonists = (self.AGENT,)
         self.observation_spaces = {self.AGENT: self.env.observation_space}
         self.action_spaces = {self.AGENT: self.env.action_space}

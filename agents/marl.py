@@ -139,6 +139,15 @@ class TeamPPOConfig:
         """A `TeamLearner` with this config on the team views `env_fns` build."""
         return TeamLearner(self, env_fns, seed, total_steps, tensorboard_log)
 
+    def load_learner(
+        self,
+        folder: Path,
+        env_fns: Sequence[Callable[[], Any]],
+        tensorboard_log: str | None = None,
+    ) -> TeamLearner:
+        """The learner with this config saved in `folder` (to resume a run)."""
+        return TeamLearner.load(folder, self, env_fns, tensorboard_log)
+
 
 @dataclass(frozen=True)
 class MAPPOConfig(TeamPPOConfig):

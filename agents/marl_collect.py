@@ -70,6 +70,13 @@ class TeamCollector:
         self.state: np.ndarray | None = None
         """Normalized current global states ``[envs, state_dim]`` (MAPPO only)."""
         self._returns = np.zeros(len(self.envs))  # true team return of each episode in flight
+        self._costs = np.zeros((2, len(self.envs)))  # true and observed cost of each episode
+        self.costs = np.zeros(len(self.envs), np.float32)
+        """The cost each view's first protagonist observed on the last step (after disruptors)."""
+        self.finished_costs: list[float] = []
+        """Observed cost of each episode finished in the last rollout (`collect`)."""
+        self.cut: dict[int, tuple[Any, Any]] = {}
+        """Views truncated on the last step: their final normalized observations and state."""
 
     def _check(self, first: Any) -> None:
         for env in self.envs[1:]:
@@ -96,6 +103,7 @@ class TeamCollector:
         Returns the rollout with its advantages and returns, ready for `ppo_update`.
         """
         cfg, n_envs = self.config, len(self.envs)
+        self.finished_costs.clear()
         if self.obs is None:
             self.reset()
         net = model.snapshot()
@@ -121,6 +129,7 @@ class TeamCollector:
             raw.append(obs)
             states.append(env.state())
         self._returns[:] = 0.0
+        self._costs[:] = 0.0
         self.obs, self.state = self._normalized(raw, states, update=self.training)
 
     def normalize(self, agent: str, observation: Any) -> np.ndarray:
@@ -153,11 +162,15 @@ class TeamCollector:
             obs, rew, term, _, infos = env.step(act)
             rewards[e] = [rew[a] for a in self.agents]
             self._returns[e] += infos[first]["true_reward"]
+            self.costs[e] = infos[first]["cost"]
+            self._costs[:, e] += (infos[first]["true_cost"], infos[first]["cost"])
             if not env.agents:
                 dones[e] = True
                 if stats is not None:
                     stats.true_returns.append(float(self._returns[e]))
-                self._returns[e] = 0.0
+                    stats.true_costs.append(float(self._costs[0, e]))
+                self.finished_costs.append(float(self._costs[1, e]))
+                self._returns[e], self._costs[:, e] = 0.0, 0.0
                 if not term[first]:
                     cut[e] = (obs, env.state())
                 obs, _ = env.reset(seed=self._episode_seed())
@@ -168,8 +181,8 @@ class TeamCollector:
         self.obs, self.state = self._normalized(raw, states, update=self.training)
         if self.reward_scaler is not None:
             rewards = self.reward_scaler(rewards, dones, update=self.training)
-        for e, (obs, state) in cut.items():
-            final = self._normalized([obs], [state], update=False)
+        self.cut = {e: self._normalized([o], [s], update=False) for e, (o, s) in cut.items()}
+        for e, final in self.cut.items():
             rewards[e] += self.config.gamma * net.values(*final)[0]
         return rewards, dones
 

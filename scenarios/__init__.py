@@ -19,6 +19,7 @@ _BOX2D = "advgame.scenarios.box2d"
 
 EXTRAS: dict[str, tuple[str, tuple[str, ...]]] = {
     "mujoco": ("", ()),
+    "safe": ("", ()),
     "box2d": ("box2d", ("Box2D", "pygame")),
 }
 """Family -> (the advgame extra that installs it, the modules its task base imports)."""
@@ -52,6 +53,17 @@ _gym("Pusher-v5", "mujoco", _MUJOCO, "7-DoF arm pushing an object to a goal")
 _gym("Reacher-v5", "mujoco", _MUJOCO, "2-link arm reaching a target")
 _gym("InvertedPendulum-v5", "mujoco", _MUJOCO, "cart-pole balancing")
 _gym("InvertedDoublePendulum-v5", "mujoco", _MUJOCO, "double cart-pole balancing")
+# Safety MuJoCo: the MuJoCo v5 tasks with a velocity cost from the true state (safety.py).
+_SAFETY = "advgame.scenarios.safety"
+_gym("SafetyAnt-v5", "safe", _SAFETY, "Ant under a planar speed limit")
+_gym("SafetyHalfCheetah-v5", "safe", _SAFETY, "HalfCheetah under a velocity limit")
+_gym("SafetyHopper-v5", "safe", _SAFETY, "Hopper under a velocity limit")
+_gym("SafetyWalker2d-v5", "safe", _SAFETY, "Walker2d under a velocity limit")
+_gym("SafetySwimmer-v5", "safe", _SAFETY, "Swimmer under a velocity limit")
+_gym("SafetyHumanoid-v5", "safe", _SAFETY, "Humanoid under a velocity limit")
+_gym("SafetyHumanoidStandup-v5", "safe", _SAFETY, "HumanoidStandup under a rising-speed limit")
+_gym("SafetyPusher-v5", "safe", _SAFETY, "Pusher under a tip-speed limit")
+_gym("SafetyReacher-v5", "safe", _SAFETY, "Reacher under a tip-speed limit")
 # Gymnasium Box2D: observation, reward and action disruptors.
 _gym("BipedalWalker-v3", "box2d", _BOX2D, "2D biped over rough terrain")
 _gym("CarRacing-v3", "box2d", _BOX2D, "top-down racing from 96x96 pixels")

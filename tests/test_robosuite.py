@@ -178,7 +178,7 @@ def test_arm_budget_scales_the_command_and_needs_an_external_robot(warm: None) -
 
 
 def test_rarl_training_fraction_scales_the_arm_budget() -> None:
-    from advgame.training import scaled
+    from advgame.trainer import scaled
 
     assert scaled(ArmDisruptor(scale=0.8), 0.5).scale == pytest.approx(0.4)
 

@@ -1,0 +1,150 @@
+"""What a training run is: `TrainConfig`, the named `METHODS`, and the learner configs.
+
+The first link of the training chain, which points one way::
+
+    train_config (TrainConfig, METHODS, learner_config)
+      -> trainer (Trainer: update_protagonists, update_adversaries, snapshot)
+      -> loop (Run: persistence, resume, progress.csv, TensorBoard, logging)
+      -> training (train, resume)
+"""
+
+from __future__ import annotations
+
+import math
+import typing
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from advgame.errors import ConfigError
+from advgame.registry import load
+
+__all__ = ["METHODS", "PROTAGONISTS", "SAFE_ALGOS", "TEAM_ALGOS", "TrainConfig", "learner_config"]
+
+_LEARNERS = "advgame.agents.sb3:LEARNERS"
+_TEAM_LEARNERS = "advgame.agents.marl:MARL_LEARNERS"
+_SAFE_LEARNERS = "advgame.agents.safe:SAFE_LEARNERS"
+SAFE_ALGOS = ("ppo-lag", "crpo", "pcrpo")
+"""Constrained protagonist learners (safe scenarios): PPO-Lagrangian, CRPO, PCRPO."""
+TEAM_ALGOS = ("mappo", "ippo", *SAFE_ALGOS)
+"""Protagonist learners that train the whole protagonist team on `advgame.team.TeamView`s
+(our torch learners) instead of one SB3 agent."""
+PROTAGONISTS = "protagonists"
+"""The key of the protagonist side in `Trainer.sides` (one agent or a whole team)."""
+_ZERO = "advgame.adversaries.noise:ZeroAdversary"
+
+METHODS: dict[str, dict[str, Any]] = {
+    "ppo": {"preset": "default", "learned": [], "train_budget_scale": 1.0},
+    "atla": {"preset": "atla", "learned": None, "train_budget_scale": 1.0},
+    "rarl": {"preset": "rarl", "learned": None, "train_budget_scale": 0.5},
+    **{
+        algo: {
+            "preset": "default",
+            "learned": [],
+            "train_budget_scale": 1.0,
+            "protagonist_algo": algo,
+        }
+        for algo in SAFE_ALGOS
+    },
+}
+"""Named starting points: plain PPO on the nominal task, ATLA (learned observation attack in
+normalized units), RARL (learned forces, trained at half the bound, tested at full), and the
+constrained learners on a safe scenario (``--preset`` picks the in-training disruption)."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a training run needs; saved as ``config.json`` in the run directory."""
+
+    scenario: str = "Hopper-v5"
+    """Registered scenario id."""
+    preset: str = "atla"
+    """Scenario preset giving the disruptors (and any fixed adversary policies)."""
+    learned: list[str] | None = None
+    """Adversary agents trained in the adversary phase (None: every adversary the preset gives
+    no fixed policy; []: none, i.e. plain training against fixed or no-op adversaries)."""
+    protagonist_algo: Literal["ppo", "sac", "td3", "mappo", "ippo", "ppo-lag", "crpo", "pcrpo"] = (
+        "ppo"
+    )
+    """Protagonist learner: SB3 PPO/SAC/TD3 for one protagonist, MAPPO/IPPO for a team, or a
+    constrained learner (PPO-Lagrangian, CRPO, PCRPO) on a safe scenario."""
+    adversary_algo: Literal["ppo", "sac"] = "ppo"
+    """Learner of each learned adversary."""
+    protagonist_hparams: dict[str, Any] | None = None
+    """Overrides of the protagonist learner config (e.g. {"n_steps": 512})."""
+    adversary_hparams: dict[str, Any] | None = None
+    """Overrides of the adversary learner config."""
+    iterations: int = 10
+    """Alternation iterations."""
+    protagonist_steps: int = 2048
+    """Protagonist steps per iteration (ATLA: one PPO update of 2048 steps)."""
+    adversary_steps: int = 2048
+    """Steps per learned adversary per iteration."""
+    warmup_steps: int = 0
+    """Protagonist steps against no-op adversaries before the first iteration."""
+    sampling: Literal["latest", "uniform", "fictitious"] = "latest"
+    """How protagonist-phase opponents are drawn from the population: the latest snapshot,
+    uniform over all members (the no-op included), or fictitious play (past snapshots)."""
+    snapshot_every: int = 1
+    """Add the adversaries to the population every this many iterations."""
+    train_budget_scale: float = 1.0
+    """Scale of every budget while training (RARL trains at a fraction, tests at full)."""
+    normalize: bool = True
+    """Normalize observations and rewards (VecNormalize) for every learner."""
+    n_envs: int = 1
+    """Views per learner."""
+    vec_env: Literal["dummy", "subproc"] = "dummy"
+    """VecEnv kind; "dummy" is faster for cheap MuJoCo tasks on 2 cores."""
+    eval_episodes: int = 2
+    """Episodes of the quick evaluation logged at every iteration."""
+    seed: int = 0
+    """Seeds models, environments and population sampling."""
+
+    def __post_init__(self) -> None:
+        for name in ("iterations", "protagonist_steps", "n_envs", "snapshot_every"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ConfigError(
+                    f"TrainConfig.{name} must be an int >= 1, got {getattr(self, name)!r}."
+                )
+        for name in ("adversary_steps", "warmup_steps", "eval_episodes"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 0:
+                raise ConfigError(
+                    f"TrainConfig.{name} must be an int >= 0, got {getattr(self, name)!r}."
+                )
+        for name in ("protagonist_algo", "adversary_algo", "sampling", "vec_env"):
+            allowed = typing.get_args(typing.get_type_hints(TrainConfig)[name])
+            if getattr(self, name) not in allowed:
+                raise ConfigError(
+                    f"TrainConfig.{name} must be one of {allowed}, got {getattr(self, name)!r}."
+                )
+        if self.learned is not None and (
+            isinstance(self.learned, str) or not all(isinstance(a, str) for a in self.learned)
+        ):
+            raise ConfigError(
+                f"TrainConfig.learned must be None or a list of adversary ids, got {self.learned!r}"
+                ' (e.g. ["observation_adversary"]).'
+            )
+        scale = self.train_budget_scale
+        if (
+            isinstance(scale, bool)
+            or not isinstance(scale, (int, float))
+            or not 0 < scale < math.inf
+        ):
+            raise ConfigError(f"train_budget_scale must be a number > 0, got {scale!r}.")
+        for name in ("protagonist_hparams", "adversary_hparams"):
+            if getattr(self, name) is not None and not isinstance(getattr(self, name), dict):
+                raise ConfigError(
+                    f"TrainConfig.{name} must be a dict, got {getattr(self, name)!r}."
+                )
+
+
+def learner_config(algo: str, overrides: dict[str, Any] | None) -> Any:
+    """The learner config of `algo` with `overrides` applied (unknown names are an error)."""
+    from advgame.config import from_dict, to_dict
+
+    learners = {**load(_LEARNERS)}
+    if algo in TEAM_ALGOS:
+        learners.update(load(_SAFE_LEARNERS if algo in SAFE_ALGOS else _TEAM_LEARNERS))
+    if algo not in learners:
+        raise ConfigError(f"Unknown learner {algo!r}; expected one of {sorted(learners)}.")
+    base = learners[algo]()
+    return from_dict(type(base), {**to_dict(base), **(overrides or {})})

@@ -1,0 +1,167 @@
+"""The trainer: one iteration of the alternation loop as three named steps.
+
+As in PSRO::
+
+    update_protagonists()   # train the protagonist vs adversaries drawn from the population
+    update_adversaries()    # train each learned adversary vs the frozen protagonist
+    snapshot()              # save the adversaries, grow the population
+
+`advgame.loop.Run` drives a `Trainer` through its iterations and persists them.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from advgame.errors import ConfigError
+from advgame.learning import EpisodeStats
+from advgame.population import Member, Population
+from advgame.registry import make
+from advgame.train_config import PROTAGONISTS, TEAM_ALGOS, TrainConfig
+
+__all__ = ["Trainer", "scaled"]
+
+log = logging.getLogger(__name__)
+
+
+def scaled(spec: Any, factor: float) -> Any:
+    """A disruptor spec with its budget multiplied by `factor` (RARL's training fraction)."""
+    if factor == 1.0:
+        return spec
+    changes = {}
+    for name in ("eps", "max_force", "max_torque", "alpha", "scale"):
+        if hasattr(spec, name):
+            value = np.asarray(getattr(spec, name), dtype=float) * factor
+            changes[name] = (
+                min(float(value), 1.0)
+                if name == "alpha"
+                else (float(value) if value.ndim == 0 else tuple(value.tolist()))
+            )
+    return replace(spec, **changes)
+
+
+class Trainer:
+    """Runs (or resumes) the alternation loop of `config` in `run_dir`."""
+
+    def __init__(self, config: TrainConfig, run_dir: str | Path, progress: bool = True) -> None:
+        self.cfg = config
+        self.dir = Path(run_dir)
+        self.progress = progress
+        probe = make(config.scenario, preset=config.preset)
+        self.protagonists: tuple[str, ...] = probe.protagonists
+        self.team = config.protagonist_algo in TEAM_ALGOS
+        if len(self.protagonists) > 1 and not self.team:
+            raise ConfigError(
+                f"{config.scenario} has {len(self.protagonists)} protagonists; train them with "
+                f"protagonist_algo='mappo' or 'ippo', not {config.protagonist_algo!r}."
+            )
+        preset = probe.preset
+        self.fixed = dict(preset.adversaries) if preset is not None else {}
+        self.learned = (
+            list(config.learned)
+            if config.learned is not None
+            else [a for a in probe.adversaries if a not in self.fixed]
+        )
+        for a in self.learned:
+            if a not in probe.adversaries:
+                raise ConfigError(
+                    f"learned names {a!r}, not an adversary of this game {probe.adversaries}."
+                )
+        self.normalized_targets = [
+            d for d in probe.disruptors.values() if getattr(d.spec, "space", "raw") == "normalized"
+        ]
+        probe.close()
+        self.train_kwargs = {
+            "disruptors": [
+                scaled(d.spec, config.train_budget_scale) for d in probe.disruptors.values()
+            ]
+        }
+        self.rng = np.random.default_rng(config.seed)
+        self.population = Population()
+        self.iteration = 0
+        self.sides: dict[str, Any] = {}
+        """`PROTAGONISTS` -> the protagonist side; each learned adversary id -> its side."""
+        self.latest: dict[str, Any] = {}
+        """Each learned adversary's spec as saved this iteration (in the population or not)."""
+
+    # -- the three steps --------------------------------------------------------------------
+    def update_protagonists(self, stats: EpisodeStats) -> None:
+        """Train the protagonist against opponents drawn from the population."""
+        side = self.sides[PROTAGONISTS]
+        for i in range(self.cfg.n_envs):
+            drawn = {
+                a: self._opponent(self.population.sample(a, self.cfg.sampling, self.rng))
+                for a in self.learned
+            }
+            side.set_policies(drawn, index=i)
+        self._push_scale(side, side)
+        side.learn(self.cfg.protagonist_steps, stats)
+
+    def update_adversaries(self, stats: EpisodeStats, frozen: dict[str, Any]) -> None:
+        """Train each learned adversary against the frozen protagonists (and latest fellows).
+
+        `frozen` maps every protagonist id to the spec of its just-saved policy.
+        """
+        prot = self.sides[PROTAGONISTS]
+        prot.freeze()
+        for agent in self.learned:
+            side = self.sides[agent]
+            fellows = {
+                a: self._opponent(self.population.of(a)[-1]) for a in self.learned if a != agent
+            }
+            side.set_policies({**frozen, **fellows})
+            self._push_scale(side, prot)
+            if self.cfg.adversary_steps:
+                side.learn(self.cfg.adversary_steps, stats)
+
+    def snapshot(self, folder: Path) -> None:
+        """Save the adversaries, add them to the population every `snapshot_every` iterations."""
+        keep = (
+            self.iteration % self.cfg.snapshot_every == 0 or self.iteration == self.cfg.iterations
+        )
+        for agent in self.learned:
+            spec = self.sides[agent].save(folder)
+            final = replace(
+                spec, path=spec.path.replace(".partial", ""), normalizer=_final(spec.normalizer)
+            )
+            self.latest[agent] = final
+            if keep:
+                self.population.add(
+                    Member(
+                        f"{agent}@{self.iteration}",
+                        "adversary",
+                        agent,
+                        final,
+                        self.iteration,
+                        meta={"scenario": self.cfg.scenario},
+                    )
+                )
+
+    # -- helpers ----------------------------------------------------------------------------
+    def _opponent(self, member: Member) -> Any:
+        spec = member.spec
+        return replace(spec, deterministic=False) if hasattr(spec, "deterministic") else spec
+
+    def _push_scale(self, side: Any, source: Any) -> None:
+        """Give `side`'s games the normalizer std of `source` (the protagonist side)."""
+        if not self.normalized_targets:
+            return
+        std = source.observation_std()
+        stds = std if isinstance(std, dict) else {self.protagonists[0]: std}
+        if std is not None:
+            for target, value in stds.items():
+                side.set_observation_scale(target, value)
+
+    def protagonist_specs(self, saved: Any) -> dict[str, Any]:
+        """What the protagonist side's `save` returned, as ``{protagonist id: spec}``."""
+        return dict(saved) if isinstance(saved, dict) else {self.protagonists[0]: saved}
+
+
+def _final(path: str | None) -> str | None:
+    """The path a file in an ``iter_NNNN.partial`` folder has once the folder is committed."""
+    return None if path is None else path.replace(".partial", "")
