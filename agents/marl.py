@@ -137,7 +137,7 @@ class TeamPPOConfig:
         tensorboard_log: str | None = None,
     ) -> TeamLearner:
         """A `TeamLearner` with this config on the team views `env_fns` build."""
-        return TeamLearner(self, env_fns, seed, total_steps, tensorboard_log)
+        return self.learner_class()(self, env_fns, seed, total_steps, tensorboard_log)
 
     def load_learner(
         self,
@@ -146,7 +146,11 @@ class TeamPPOConfig:
         tensorboard_log: str | None = None,
     ) -> TeamLearner:
         """The learner with this config saved in `folder` (to resume a run)."""
-        return TeamLearner.load(folder, self, env_fns, tensorboard_log)
+        return self.learner_class().load(folder, self, env_fns, tensorboard_log)
+
+    def learner_class(self) -> type[TeamLearner]:
+        """The learner this config builds (constrained configs build a subclass)."""
+        return TeamLearner
 
 
 @dataclass(frozen=True)

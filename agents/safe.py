@@ -88,24 +88,9 @@ class SafePPOConfig(TeamPPOConfig):
         """How to combine the objectives given the estimated episode cost (subclasses)."""
         raise NotImplementedError
 
-    def make_learner(
-        self,
-        env_fns: Sequence[Callable[[], Any]],
-        seed: int,
-        total_steps: int,
-        tensorboard_log: str | None = None,
-    ) -> SafeLearner:
-        """A `SafeLearner` with this config on the team views `env_fns` build."""
-        return SafeLearner(self, env_fns, seed, total_steps, tensorboard_log)
-
-    def load_learner(
-        self,
-        folder: Path,
-        env_fns: Sequence[Callable[[], Any]],
-        tensorboard_log: str | None = None,
-    ) -> SafeLearner:
-        """The learner with this config saved in `folder` (to resume a run)."""
-        return SafeLearner.load(folder, self, env_fns, tensorboard_log)
+    def learner_class(self) -> type[SafeLearner]:
+        """The constrained learner (a `TeamLearner` with a cost critic)."""
+        return SafeLearner
 
 
 @dataclass(frozen=True)
