@@ -76,7 +76,7 @@ class LLMAdversary:
     task: str = "a simulated robot control task (MuJoCo)"
     """What the protagonist is doing, in words, for the prompt."""
     template: str | None = None
-    """A prompt template file (``string.Template``, ``$state``, ``$low``, ...); ``None``: the
+    """A prompt template file (``string.Template``: ``$state``, ``$rewards``, ``$low``, ...); ``None``: the
     packaged one for the disruptor's kind (see `template_text`)."""
     fallback: Literal["noop", "random"] = "noop"
     """What a rejected reply or a failed call plays: the no-op, or uniform in the region."""
@@ -217,6 +217,8 @@ class LLMPolicy:
         self._pending: Future | None = None
         self._current: np.ndarray | None = None
         self.episode, self.step = -1, 0
+        self.game: Any = None
+        """The game played (`attach`): the prompt reports its true rewards."""
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle the configuration and counters; connections and threads are rebuilt."""
@@ -233,13 +235,22 @@ class LLMPolicy:
             self._current = None  # async keeps playing its last reply across episodes
         self.episode, self.step = self.episode + 1, 0
 
+    def attach(self, game: Any, victims: Any) -> None:
+        """Remember the game (`advgame.episodes.build_policies` calls this): its true rewards."""
+        self.game = game
+
     def prompt(self, observation: Any) -> str:
         """The prompt for the true state `observation`."""
         d = self.spec.digits
         state = np.asarray(observation, dtype=np.float64).ravel()
         fmt = _fmt(d)
         history = "; ".join(fmt(v) for v in self._recent) if self.spec.history else ""
+        rewards = "unknown"
+        if self.game is not None:
+            last, total = self.game.last_reward, self.game.episode_reward
+            rewards = f"{last:.{d}g} at the last step, {total:.{d}g} so far this episode"
         return self.template.safe_substitute(
+            rewards=rewards,
             task=self.spec.task,
             state=fmt(state),
             state_size=state.size,

