@@ -35,7 +35,15 @@ from pettingzoo import ParallelEnv
 
 from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import ActionError, ConfigError, did_you_mean
-from advgame.moves import ACT, SENSE, Move, missing_or_unknown, package, protagonist_action
+from advgame.moves import (
+    ACT,
+    SENSE,
+    Hooks,
+    Move,
+    missing_or_unknown,
+    package,
+    protagonist_action,
+)
 from advgame.policy import AgentInfo
 from advgame.schedule import PHASES, Schedule
 from advgame.task import TaskBase
@@ -111,25 +119,10 @@ class Game(ParallelEnv):
         for p in self.protagonists:  # in protagonist order; shape None: a Discrete action
             s = task.action_spaces[p]
             self._p_spaces[p] = (s, None if isinstance(s, spaces.Discrete) else s.shape)
-        by_hook: dict[str, list[Disruptor]] = {
-            "observation": [],
-            "action": [],
-            "reward": [],
-            "environment": [],
-        }
-        for d in self.disruptors.values():
-            by_hook[d.hook].append(d)
-        self._sensing = [
-            d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "sense"
-        ]
-        self._stale = [
-            d for d in by_hook["observation"] if getattr(d, "timing", "sense") == "stale"
-        ]
-        self._action_ds, self._reward_ds = by_hook["action"], by_hook["reward"]
-        stepped = [d for d in by_hook["environment"] if not getattr(d, "at_reset", False)]
-        self._setup_ds = [d for d in by_hook["environment"] if getattr(d, "at_reset", False)]
-        self._model_ds = [d for d in stepped if getattr(d, "edits_model", False)]
-        self._data_ds = [d for d in stepped if not getattr(d, "edits_model", False)]
+        hooks = Hooks.of(self.disruptors.values())
+        self._sensing, self._stale, self._setup_ds = hooks.sensing, hooks.stale, hooks.setup
+        self._action_ds, self._reward_ds = hooks.action, hooks.reward
+        self._model_ds, self._data_ds = hooks.model, hooks.data
         self._env_ds = self._model_ds + self._data_ds
         self._act_ds = [*self._env_ds, *self._action_ds, *self._reward_ds, *self._stale]
         self._held_sensing = [d for d in self._sensing if d.schedule.hold]

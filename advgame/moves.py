@@ -7,9 +7,9 @@ per-agent dicts (`Game.step`). `protagonist_action` validates what a protagonist
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -17,9 +17,60 @@ from gymnasium import spaces
 from advgame.disruptors.base import all_finite
 from advgame.errors import ActionError, did_you_mean
 
-__all__ = ["ACT", "SENSE", "Move", "missing_or_unknown", "package", "protagonist_action"]
+if TYPE_CHECKING:
+    from advgame.disruptors.base import Disruptor
+
+__all__ = [
+    "ACT",
+    "SENSE",
+    "Hooks",
+    "Move",
+    "missing_or_unknown",
+    "package",
+    "protagonist_action",
+]
 
 SENSE, ACT = "sense", "act"
+
+
+@dataclass(frozen=True)
+class Hooks:
+    """A game's disruptors grouped by where in a step they act (built once per game)."""
+
+    sensing: list[Disruptor]
+    """Observation disruptors that move in the sense move (they see ``s_t`` first)."""
+    stale: list[Disruptor]
+    """Observation disruptors with ``timing="stale"`` (they move with the protagonist)."""
+    action: list[Disruptor]
+    """Action disruptors."""
+    reward: list[Disruptor]
+    """Reward and cost disruptors."""
+    setup: list[Disruptor]
+    """Environment disruptors that act once, in the setup move at t = 0 (workspace)."""
+    model: list[Disruptor]
+    """Environment disruptors that edit the model each step (dynamics; may recompile it)."""
+    data: list[Disruptor]
+    """Environment disruptors that edit the simulation data each step (forces)."""
+
+    @classmethod
+    def of(cls, disruptors: Iterable[Disruptor]) -> Hooks:
+        """Group `disruptors` by hook, timing and what they edit."""
+        by_hook: dict[str, list[Disruptor]] = {h: [] for h in ("observation", "action", "reward")}
+        by_hook["environment"] = []
+        for d in disruptors:
+            by_hook[d.hook].append(d)
+        timing = {id(d): getattr(d, "timing", "sense") for d in by_hook["observation"]}
+        env = by_hook["environment"]
+        stepped = [d for d in env if not getattr(d, "at_reset", False)]
+        return cls(
+            sensing=[d for d in by_hook["observation"] if timing[id(d)] == "sense"],
+            stale=[d for d in by_hook["observation"] if timing[id(d)] == "stale"],
+            action=by_hook["action"],
+            reward=by_hook["reward"],
+            setup=[d for d in env if getattr(d, "at_reset", False)],
+            model=[d for d in stepped if getattr(d, "edits_model", False)],
+            data=[d for d in stepped if not getattr(d, "edits_model", False)],
+        )
 
 
 @dataclass(slots=True)

@@ -157,7 +157,7 @@ def _threat_md(record: Mapping[str, Any]) -> str:
         f"Preset `{record['preset']}` ({record['description']}). Attack columns, learned "
         "columns and best responses all play in it, whatever preset each protagonist was "
         "trained in, so every row faces the same disruptors and budgets (learned adversaries "
-        "that cannot act in it play in their training preset: see each column's game above):",
+        "that cannot act in it play in their training preset: see each column's game under Adversary columns):",
         "",
     ]
     return "\n".join(lines + [f"- `{d}`" for d in record["disruptors"]])
