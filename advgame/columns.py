@@ -35,6 +35,7 @@ to `COLUMN_KINDS`.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -251,14 +252,22 @@ def _learned_setup(
     return AdversarySetup({"preset": preset}, specs)
 
 
-def _misfit(scenario: str, preset: str, specs: Mapping[str, Any]) -> str:
-    """Why `specs` cannot act in `preset` of `scenario` ('' if they can)."""
+@functools.lru_cache(maxsize=32)
+def _adversary_shapes(scenario: str, preset: str) -> dict[str, tuple[int, ...]]:
+    """Each adversary's action shape in `preset` of `scenario` (one game built per pair)."""
     from advgame import make
-    from advgame.checkpoint import SB3Checkpoint, load_model
 
     game = make(scenario, preset=preset)
-    shapes = {a: game.action_space(a).shape for a in game.adversaries}
+    shapes = {a: tuple(game.action_space(a).shape or ()) for a in game.adversaries}
     game.close()
+    return shapes
+
+
+def _misfit(scenario: str, preset: str, specs: Mapping[str, Any]) -> str:
+    """Why `specs` cannot act in `preset` of `scenario` ('' if they can)."""
+    from advgame.checkpoint import SB3Checkpoint, load_model
+
+    shapes = _adversary_shapes(scenario, preset)
     for agent, spec in specs.items():
         if agent not in shapes:
             return (
@@ -266,7 +275,7 @@ def _misfit(scenario: str, preset: str, specs: Mapping[str, Any]) -> str:
                 f"{scenario} has no such agent (it has {sorted(shapes)})"
             )
         if isinstance(spec, SB3Checkpoint):
-            have = load_model(str(spec.path), spec.algo).action_space.shape
+            have = tuple(load_model(str(spec.path), spec.algo).action_space.shape or ())
             if have != shapes[agent]:
                 return (
                     f"The learned {agent!r} acts with shape {have}, but in the threat model "
