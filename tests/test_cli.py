@@ -231,6 +231,7 @@ def test_quick_demo_trains_evaluates_and_prints_the_report_path(tmp_path: Path, 
     assert f"report: {out / 'report.md'}" in printed
     report = (out / "report.md").read_text()
     assert "ppo" in report and "atla" in report
+    assert "attack mad" in report and "attack critic" in report  # the worst-of-attacks suite
     for method in ("ppo", "atla"):
         assert json.loads((out / "runs" / method / "state.json").read_text())["iteration"] == 2
     assert_png(out / "heatmap.png")
