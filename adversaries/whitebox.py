@@ -230,35 +230,32 @@ class WhiteBoxAttackPolicy:
                 f"{type(self.spec).__name__} was not attached to a game; play it through "
                 "advgame.rollout / evaluation (build_policies attaches it)."
             )
-        d, out, start = self.disruptor, [], 0
-        for target in d.targets:
-            n = d.dims[target].size
-            unit = d.unit[start : start + n]
-            out.append(self._attack(target, unit))
-            start += n
+        out = [self._attack(target) for target in self.disruptor.targets]
         return np.concatenate(out).astype(np.float32)
 
     def objective_of(self, target: str, u: np.ndarray) -> float:
         """The attack's objective at action block `u` for `target` (for tests and reports)."""
         import torch
 
-        d = self.disruptor
-        start = sum(d.dims[t].size for t in d.targets[: d.targets.index(target)])
-        n = d.dims[target].size
-        clean, perturb = self._problem(target, d.unit[start : start + n])
+        clean, perturb = self._problem(target)
         with torch.enable_grad():  # objectives may differentiate internally (e.g. a critic's)
             u_t = torch.as_tensor(np.asarray(u, dtype=np.float32))
             return float(self.spec.objective(self.victims[target], clean, perturb(u_t)).detach())
 
-    def _problem(self, target: str, unit: np.ndarray) -> tuple[Any, Any]:
+    def _problem(self, target: str) -> tuple[Any, Any]:
         """`target`'s clean observation batch and ``u -> perturbed batch``.
 
-        The perturbed observation is clipped into the observation space, as the game clips it.
+        ``u`` is `target`'s block of the adversary action, scaled by its block of the
+        disruptor's budget (current ε ⊙ normalizer scale). The perturbed observation is clipped
+        into the observation space, as the game clips it.
         """
         import torch
 
         assert self.game is not None  # act() checked
-        space = self.disruptor.spaces[target]
+        d = self.disruptor
+        start = sum(d.dims[t].size for t in d.targets[: d.targets.index(target)])
+        unit = d.unit[start : start + d.dims[target].size]
+        space = d.spaces[target]
         true_obs = self.game.true_observation(target)
         clean = torch.as_tensor(np.asarray(true_obs, dtype=np.float32).reshape(1, -1))
         index = torch.as_tensor(self.disruptor.dims[target], dtype=torch.long)
@@ -272,12 +269,12 @@ class WhiteBoxAttackPolicy:
 
         return clean, perturb
 
-    def _attack(self, target: str, unit: np.ndarray) -> np.ndarray:
+    def _attack(self, target: str) -> np.ndarray:
         """Projected gradient ascent from random starts; the best iterate of every walk."""
         import torch
 
-        victim, size = self.victims[target], unit.size
-        clean, perturb = self._problem(target, unit)
+        victim, size = self.victims[target], self.disruptor.dims[target].size
+        clean, perturb = self._problem(target)
         best_u, best = np.zeros(size), -np.inf
         with torch.enable_grad():
             for _ in range(1 + self.spec.restarts):

@@ -59,12 +59,11 @@ class Hooks:
         by_hook["environment"] = []
         for d in disruptors:
             by_hook[d.hook].append(d)
-        timing = {id(d): getattr(d, "timing", "sense") for d in by_hook["observation"]}
-        env = by_hook["environment"]
+        obs, env = by_hook["observation"], by_hook["environment"]
         stepped = [d for d in env if not getattr(d, "at_reset", False)]
         return cls(
-            sensing=[d for d in by_hook["observation"] if timing[id(d)] == "sense"],
-            stale=[d for d in by_hook["observation"] if timing[id(d)] == "stale"],
+            sensing=[d for d in obs if getattr(d, "timing", "sense") == "sense"],
+            stale=[d for d in obs if getattr(d, "timing", "sense") == "stale"],
             action=by_hook["action"],
             reward=by_hook["reward"],
             setup=[d for d in env if getattr(d, "at_reset", False)],
