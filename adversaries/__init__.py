@@ -1,7 +1,7 @@
 """Adversary policies: noise, scheduled shifts, white-box attacks (MAD, critic, PGD), LLMs.
 
 Every adversary here is a frozen, picklable *spec* with ``build(info) -> Policy``; the built
-policy speaks the one `advgame.policy.Policy` interface (``reset(seed)``, ``act(obs)``), so
+policy speaks the one `advgame.core.policy.Policy` interface (``reset(seed)``, ``act(obs)``), so
 noise, schedules, networks and language models are interchangeable. Values are given in the
 disruptor's raw units (a state offset, newtons, a gravity magnitude) and encoded into the
 adversary's bounded action space; the disruptor then clips them into its budget.

@@ -37,8 +37,8 @@ import numpy as np
 
 from advgame.adversaries.llm_backends import BackendError, LocalModel, OpenAIEndpoint
 from advgame.adversaries.llm_reply import Reply, parse_reply, reply_schema
+from advgame.core.policy import AgentInfo
 from advgame.errors import BudgetError, ConfigError, did_you_mean
-from advgame.policy import AgentInfo
 
 __all__ = ["KINDS", "LLMAdversary", "LLMPolicy", "template_text"]
 
@@ -236,7 +236,7 @@ class LLMPolicy:
         self.episode, self.step = self.episode + 1, 0
 
     def attach(self, game: Any, victims: Any) -> None:
-        """Remember the game (`advgame.episodes.build_policies` calls this): its true rewards."""
+        """Remember the game (`advgame.core.episodes.build_policies` calls this): its true rewards."""
         self.game = game
 
     def prompt(self, observation: Any) -> str:

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.policy import AgentInfo, ConstantPolicy, Policy
 from advgame.errors import ConfigError
-from advgame.policy import AgentInfo, ConstantPolicy, Policy
 
 __all__ = ["ConstantAdversary", "SinusoidAdversary"]
 

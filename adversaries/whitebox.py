@@ -14,8 +14,8 @@ trained network:
   (Pattanaik et al.), ``V(s+δ)`` for PPO;
 * `PGDAttack` — maximise a user-given differentiable objective.
 
-How it plays: `advgame.episodes.build_policies` attaches the attack to the game and to the
-protagonist policies it attacks (each must be an `advgame.policy.WhiteBox`: an SB3 policy with
+How it plays: `advgame.core.episodes.build_policies` attaches the attack to the game and to the
+protagonist policies it attacks (each must be an `advgame.core.policy.WhiteBox`: an SB3 policy with
 its normalizer, or a MAPPO/IPPO actor). In the sense move the attack reads each target's true
 observation ``s_t`` and runs projected gradient ascent on the adversary's own action ``u``:
 inside ``[-1, 1]^k`` (L∞) or each target's unit ball (L2), which the disruptor maps to
@@ -32,14 +32,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from advgame.core.policy import AgentInfo, WhiteBox
 from advgame.disruptors.observation import ObservationRuntime
 from advgame.errors import ConfigError
-from advgame.policy import AgentInfo, WhiteBox
 
 if TYPE_CHECKING:
     import torch
 
-    from advgame.game import Game
+    from advgame.core.game import Game
 
 __all__ = ["CriticAttack", "MADAttack", "PGDAttack", "WhiteBoxAttackPolicy"]
 
@@ -209,7 +209,7 @@ class WhiteBoxAttackPolicy:
                 raise ConfigError(
                     f"{type(self.spec).__name__} on {self.agent!r} needs white-box access to "
                     f"{target!r}'s policy, but it is {type(victim).__name__}. White-box policies: "
-                    "SB3 checkpoints (advgame.checkpoint.SB3Checkpoint/SB3Policy) and MAPPO/IPPO "
+                    "SB3 checkpoints (advgame.training.checkpoint.SB3Checkpoint/SB3Policy) and MAPPO/IPPO "
                     "actors; a learner being trained inside a view cannot be attacked this way."
                 )
             n = int(np.prod(self.disruptor.spaces[target].shape))

@@ -20,14 +20,14 @@ __version__ = "0.1.0"
 
 # public name -> module that defines it (imported on first attribute access)
 _LAZY = {
-    "make": "advgame.registry",
-    "list_scenarios": "advgame.registry",
-    "scenario_spec": "advgame.registry",
-    "register": "advgame.registry",
-    "Preset": "advgame.registry",
-    "ScenarioSpec": "advgame.registry",
-    "Game": "advgame.game",
-    "Schedule": "advgame.schedule",
+    "make": "advgame.core.registry",
+    "list_scenarios": "advgame.core.registry",
+    "scenario_spec": "advgame.core.registry",
+    "register": "advgame.core.registry",
+    "Preset": "advgame.core.registry",
+    "ScenarioSpec": "advgame.core.registry",
+    "Game": "advgame.core.game",
+    "Schedule": "advgame.core.schedule",
     "ObservationDisruptor": "advgame.disruptors",
     "ActionDisruptor": "advgame.disruptors",
     "RewardDisruptor": "advgame.disruptors",
@@ -37,19 +37,32 @@ _LAZY = {
     "WorkspaceDisruptor": "advgame.disruptors",
     "Shift": "advgame.disruptors",
     "ArmDisruptor": "advgame.disruptors",
-    "AgentInfo": "advgame.policy",
-    "Policy": "advgame.policy",
-    "PolicySpec": "advgame.policy",
-    "SingleAgentView": "advgame.views",
-    "view_factory": "advgame.views",
-    "rollout": "advgame.episodes",
-    "EpisodeResult": "advgame.episodes",
+    "AgentInfo": "advgame.core.policy",
+    "Policy": "advgame.core.policy",
+    "PolicySpec": "advgame.core.policy",
+    "SingleAgentView": "advgame.core.views",
+    "view_factory": "advgame.core.views",
+    "rollout": "advgame.core.episodes",
+    "EpisodeResult": "advgame.core.episodes",
     "AdvgameError": "advgame.errors",
 }
 
 __all__ = sorted(_LAZY)
 
 if TYPE_CHECKING:
+    from advgame.core.episodes import EpisodeResult, rollout
+    from advgame.core.game import Game
+    from advgame.core.policy import AgentInfo, Policy, PolicySpec
+    from advgame.core.registry import (
+        Preset,
+        ScenarioSpec,
+        list_scenarios,
+        make,
+        register,
+        scenario_spec,
+    )
+    from advgame.core.schedule import Schedule
+    from advgame.core.views import SingleAgentView, view_factory
     from advgame.disruptors import (
         ActionDisruptor,
         ArmDisruptor,
@@ -61,13 +74,7 @@ if TYPE_CHECKING:
         Shift,
         WorkspaceDisruptor,
     )
-    from advgame.episodes import EpisodeResult, rollout
     from advgame.errors import AdvgameError
-    from advgame.game import Game
-    from advgame.policy import AgentInfo, Policy, PolicySpec
-    from advgame.registry import Preset, ScenarioSpec, list_scenarios, make, register, scenario_spec
-    from advgame.schedule import Schedule
-    from advgame.views import SingleAgentView, view_factory
 
 
 def __getattr__(name: str) -> Any:

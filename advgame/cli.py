@@ -33,7 +33,7 @@ EPILOG = """examples:
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
-    from advgame.registry import list_scenarios, scenario_spec
+    from advgame.core.registry import list_scenarios, scenario_spec
 
     ids = args.ids or list_scenarios(args.family)
     for sid in ids:
@@ -48,7 +48,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _train_config(args: argparse.Namespace) -> Any:
-    from advgame.config import from_dict, load_json, override, to_dict
+    from advgame.core.config import from_dict, load_json, override, to_dict
     from advgame.training import METHODS, TrainConfig
 
     cfg = load_json(TrainConfig, args.config) if args.config else TrainConfig()
@@ -81,7 +81,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from advgame.suite import BUDGETS, evaluate_runs
+    from advgame.evaluation.suite import BUDGETS, evaluate_runs
 
     out = evaluate_runs(
         args.runs,
@@ -108,14 +108,14 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from advgame.suite import report_folder
+    from advgame.evaluation.suite import report_folder
 
     print(f"report: {report_folder(Path(args.folder))}")
     return 0
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from advgame.suite import demo
+    from advgame.evaluation.suite import demo
 
     print(f"report: {demo(Path(args.out), quick=args.quick, workers=args.workers)}")
     return 0
@@ -136,7 +136,7 @@ _COLUMN_HELP = (
 
 
 def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
-    """Who is evaluated, and against whom (see `advgame.suite.evaluate_runs`)."""
+    """Who is evaluated, and against whom (see `advgame.evaluation.suite.evaluate_runs`)."""
     p.add_argument(
         "runs", nargs="*", help="run directories whose final protagonists join the evaluation"
     )
@@ -176,7 +176,7 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``advgame`` (exposed for documentation and tests)."""
-    from advgame.config import add_arguments, field_docs, scalar_field
+    from advgame.core.config import add_arguments, field_docs, scalar_field
     from advgame.training import METHODS, TrainConfig
 
     parser = argparse.ArgumentParser(

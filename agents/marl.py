@@ -7,7 +7,7 @@ observation; they differ in the critic:
 * **MAPPO** (Yu et al., 2022): a centralised critic on the true global state `TeamView.state`.
 * **IPPO** (de Witt et al., 2020): one critic per protagonist on its local observation.
 
-`TeamLearner` follows the protocol of `advgame.learning.Side` (``agents``, ``steps``, ``learn``,
+`TeamLearner` follows the protocol of `advgame.training.learning.Side` (``agents``, ``steps``, ``learn``,
 ``freeze``, ``set_policies``, ``set_observation_scale``, ``observation_std``, ``save``,
 ``load``, ``close``), so the alternation loop drives it like any other side. Its views are
 stepped in sync in this process. Every random draw of a run comes from the two generators made
@@ -17,7 +17,7 @@ When the protagonists are homogeneous and may share one policy, IPPO with parame
 on Stable-Baselines3 through SuperSuit instead: `advgame.agents.marl_shared.SharedIPPO`.
 
 Example:
-    >>> from advgame.team import team_factory
+    >>> from advgame.core.team import team_factory
     >>> fns = [team_factory("MA-HalfCheetah-2x3", preset="default")]
     >>> learner = TeamLearner(MAPPOConfig(n_steps=64), fns, seed=0, total_steps=128)
     >>> learner.learn(128); learner.steps
@@ -47,7 +47,7 @@ from advgame.agents.marl_nets import (
 )
 from advgame.agents.marl_ppo import ppo_update
 from advgame.errors import ConfigError
-from advgame.learning import EpisodeStats
+from advgame.training.learning import EpisodeStats
 
 __all__ = ["MARL_LEARNERS", "IPPOConfig", "MAPPOConfig", "TeamLearner", "TeamPPOConfig"]
 
@@ -178,7 +178,7 @@ class TeamLearner:
 
     Args:
         config: a `MAPPOConfig` or `IPPOConfig`.
-        env_fns: thunks building `advgame.team.TeamView`s (`advgame.team.team_factory`); all
+        env_fns: thunks building `advgame.core.team.TeamView`s (`advgame.core.team.team_factory`); all
             are stepped in sync in this process, one rollout holds ``n_steps`` of each.
         seed: seeds the weights, the action noise, the minibatch order and the episode seeds.
         total_steps: planned environment steps of the whole run (for the learning-rate decay).
@@ -198,7 +198,7 @@ class TeamLearner:
             raise ConfigError(f"TeamLearner needs a MAPPOConfig or IPPOConfig, got {config!r}.")
         if not env_fns:
             raise ConfigError(
-                "TeamLearner needs at least one view thunk (advgame.team.team_factory)."
+                "TeamLearner needs at least one view thunk (advgame.core.team.team_factory)."
             )
         if not isinstance(total_steps, int) or total_steps < 1:
             raise ConfigError(f"total_steps must be an int >= 1, got {total_steps!r}.")

@@ -27,8 +27,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from advgame.core.policy import AgentInfo
 from advgame.errors import ConfigError
-from advgame.policy import AgentInfo
 
 __all__ = [
     "ACTORS_FORMAT",
@@ -309,7 +309,7 @@ class TorchActorPolicy:
 
     Acts with the Gaussian's mean (`deterministic`) or samples it with its own generator
     (reseeded by `reset(seed)`); actions are clipped into the action space, as in training.
-    It is an `advgame.policy.WhiteBox` (actor only: MAD attacks it; the critic is not saved).
+    It is an `advgame.core.policy.WhiteBox` (actor only: MAD attacks it; the critic is not saved).
     """
 
     def __init__(self, record: Mapping[str, Any], deterministic: bool = True) -> None:
@@ -341,7 +341,7 @@ class TorchActorPolicy:
             action = action + self.std * self._rng.standard_normal(action.shape)
         return np.clip(action, self.low, self.high).astype(np.float32)
 
-    # -- white-box access (`advgame.policy.WhiteBox`): forward passes only ------------------
+    # -- white-box access (`advgame.core.policy.WhiteBox`): forward passes only ------------------
     def action_mean(self, obs: torch.Tensor) -> torch.Tensor:
         """The Gaussian's mean for a batch of raw observations, behind the frozen normalizer."""
         x = obs

@@ -12,7 +12,7 @@ SuperSuit's agents-as-envs vectorisation forces one policy on *every* agent of t
 why it only ever sees the protagonist team: the adversaries stay frozen policies inside the view.
 Heterogeneous teams (different shapes or roles) train with `advgame.agents.marl.TeamLearner`.
 
-`SharedIPPO` follows the `advgame.learning.Side` protocol like `TeamLearner`; its `steps` count
+`SharedIPPO` follows the `advgame.training.learning.Side` protocol like `TeamLearner`; its `steps` count
 team steps (SB3 counts one step per protagonist slot).
 """
 
@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from advgame.checkpoint import SB3Checkpoint
 from advgame.errors import ConfigError
-from advgame.learning import EpisodeStats, normalized
+from advgame.training.checkpoint import SB3Checkpoint
+from advgame.training.learning import EpisodeStats, normalized
 
 __all__ = ["SharedIPPO", "shared_venv"]
 
@@ -97,7 +97,7 @@ class SharedIPPO:
 
     Args:
         config: an `advgame.agents.PPOConfig` (the paper's table).
-        env_fn: a thunk building a `TeamView` (`advgame.team.team_factory`).
+        env_fn: a thunk building a `TeamView` (`advgame.core.team.team_factory`).
         seed: seeds SB3 (which seeds torch and numpy globally) and the team views.
         total_steps: planned team steps of the run (for the learning-rate decay).
         n_envs: team views stepped in sync in this process.

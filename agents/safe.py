@@ -20,7 +20,7 @@ mean observed cost of the episodes finished in the last rollout. Limits are epis
 the mixed objectives weight the two clipped surrogates (not one surrogate of mixed advantages).
 
 Example:
-    >>> from advgame.team import team_factory
+    >>> from advgame.core.team import team_factory
     >>> fns = [team_factory("SafetyReacher-v5", preset="default")]
     >>> learner = PCRPOConfig(n_steps=64, cost_limit=5.0).make_learner(fns, 0, 128)
     >>> learner.learn(128); learner.steps
@@ -42,7 +42,7 @@ import torch
 from advgame.agents.marl import TeamLearner, TeamPPOConfig
 from advgame.agents.safe_ppo import Direction, SafeCollector, SafeModel, safe_update
 from advgame.errors import ConfigError
-from advgame.learning import EpisodeStats
+from advgame.training.learning import EpisodeStats
 
 __all__ = ["SAFE_LEARNERS", "CRPOConfig", "PCRPOConfig", "PPOLagConfig", "SafeLearner"]
 

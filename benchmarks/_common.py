@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.payoff import ci95
+from advgame.evaluation.payoff import ci95
 
 
 def fmt(values: list[float]) -> str:

@@ -33,7 +33,7 @@ COLUMNS = ("nominal", "random", "MAD", "critic", "learned")
 
 
 def _train(seed: int, args: argparse.Namespace) -> dict[str, Path]:
-    from advgame.suite import _train_or_resume
+    from advgame.evaluation.suite import _train_or_resume
     from advgame.training import METHODS, TrainConfig
 
     common = {
@@ -58,7 +58,7 @@ def _train(seed: int, args: argparse.Namespace) -> dict[str, Path]:
 def _play(args: argparse.Namespace, protagonist: Any, adversary: Any, seed: int) -> tuple:
     """Mean true return over the episodes, and wall ms per protagonist step."""
     import advgame
-    from advgame.episodes import rollout
+    from advgame.core.episodes import rollout
 
     game = advgame.make(args.scenario, preset=args.preset, phase="eval")
     policies = {"protagonist": protagonist}
@@ -76,8 +76,8 @@ def _seed_job(seed: int, args: argparse.Namespace) -> dict[str, float]:
     import torch
 
     from advgame.adversaries import CriticAttack, MADAttack, RandomAdversary
-    from advgame.exploit import best_responses
-    from advgame.suite import run_protagonist
+    from advgame.evaluation.exploit import best_responses
+    from advgame.evaluation.suite import run_protagonist
 
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)

@@ -41,8 +41,8 @@ from pathlib import Path
 import numpy as np
 from _common import step_through
 
-from advgame.checkpoint import SB3Checkpoint
 from advgame.evaluation import AdversarySetup, PayoffTable, evaluate, population_jobs
+from advgame.training.checkpoint import SB3Checkpoint
 
 ENV = "HalfCheetah-v5"
 

@@ -33,7 +33,7 @@ from _common import step_through
 
 import advgame
 from advgame.adversaries import GaussianAdversary
-from advgame.views import SingleAgentView
+from advgame.core.views import SingleAgentView
 
 ENV = "HalfCheetah-v5"
 GOALS = {"view": 0.95, "parallel": 0.90}

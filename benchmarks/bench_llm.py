@@ -57,7 +57,7 @@ def _adversaries(transcript: str | None = None, mode: str = "sync") -> dict[str,
 
 def latency(out: Path, steps: int) -> dict[str, Any]:
     """Per-call latency and rollout steps/s at call frequencies 1, 100, 500."""
-    from advgame.episodes import build_policies
+    from advgame.core.episodes import build_policies
 
     rows: dict[str, Any] = {}
     for every in (500, 100, 1):
@@ -96,7 +96,7 @@ def _train(kind: str, seed: int, steps: int, out: Path, mode: str) -> dict[str, 
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from advgame.views import SingleAgentView
+    from advgame.core.views import SingleAgentView
 
     torch.set_num_threads(1)
     run = out / "runs" / f"{kind}-s{seed}"

@@ -4,7 +4,7 @@ Five measurements in one run, in interleaved rounds so that machine noise hits t
 
 * ``raw``: ``gymnasium_robotics.mamujoco_v1.parallel_env("HalfCheetah", "2x3")`` stepped with
   random actions drawn before timing (the simulator and MaMuJoCo's factorization only).
-* ``team view``: `advgame.team.TeamView` of preset ``default`` (bounded observation and action
+* ``team view``: `advgame.core.team.TeamView` of preset ``default`` (bounded observation and action
   adversaries, each playing a `GaussianAdversary`, σ = 0.05), random protagonist actions: a
   sense move and an act move per step.
 * ``MAPPO`` / ``IPPO``: `TeamLearner` with the paper's table (2048 steps per rollout, 10
@@ -31,7 +31,7 @@ from advgame.adversaries import GaussianAdversary
 from advgame.agents.marl import IPPOConfig, MAPPOConfig, TeamLearner
 from advgame.agents.marl_shared import SharedIPPO
 from advgame.agents.sb3 import PPOConfig
-from advgame.team import team_factory
+from advgame.core.team import team_factory
 
 SID = "MA-HalfCheetah-2x3"
 NOISE = {

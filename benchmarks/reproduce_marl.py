@@ -40,7 +40,7 @@ PARTIAL_TARGET = "agent_0"
 
 def _returns(scenario: str, make_kwargs: dict, policies: dict, seed: int, episodes: int) -> list:
     import advgame
-    from advgame.episodes import rollout
+    from advgame.core.episodes import rollout
 
     game = advgame.make(scenario, phase="eval", **make_kwargs)
     results = rollout(game, policies, seed=10_000 + seed * 100, episodes=episodes)
@@ -58,8 +58,8 @@ def _job(seed: int, condition: str, args: argparse.Namespace) -> dict[str, Any]:
     import torch
 
     from advgame.adversaries import GaussianAdversary
-    from advgame.registry import scenario_spec
-    from advgame.suite import _train_or_resume, run_protagonist
+    from advgame.core.registry import scenario_spec
+    from advgame.evaluation.suite import _train_or_resume, run_protagonist
     from advgame.training import TrainConfig
 
     logging.basicConfig(level=logging.WARNING)

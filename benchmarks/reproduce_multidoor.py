@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.payoff import ci95
+from advgame.evaluation.payoff import ci95
 
 SCENARIO = "RS-MultiRobustDoor"
 
@@ -40,7 +40,7 @@ def fmt(values: list[float]) -> str:
 
 
 def _train(seed: int, args: argparse.Namespace) -> dict[str, str]:
-    from advgame.suite import _train_or_resume
+    from advgame.evaluation.suite import _train_or_resume
     from advgame.training import TrainConfig
 
     common = {
@@ -64,7 +64,7 @@ def _train(seed: int, args: argparse.Namespace) -> dict[str, str]:
 
 
 def _learned_arm(run_dir: Path) -> Any:
-    from advgame.checkpoint import SB3Checkpoint
+    from advgame.training.checkpoint import SB3Checkpoint
 
     folder = run_dir / json.loads((run_dir / "state.json").read_text())["checkpoint"]
     norm = folder / "arm_adversary_obs_norm.npz"
@@ -75,8 +75,8 @@ def _learned_arm(run_dir: Path) -> Any:
 
 def _evaluate(seed: int, dirs: dict[str, str], episodes: int) -> dict[str, float]:
     import advgame
-    from advgame.episodes import rollout
-    from advgame.suite import run_protagonist
+    from advgame.core.episodes import rollout
+    from advgame.evaluation.suite import run_protagonist
 
     arm = _learned_arm(Path(dirs["alternation"]))
     row: dict[str, float] = dict(arm_motion(Path(dirs["alternation"]).parents[1], seed))
@@ -102,8 +102,8 @@ def arm_motion(out: Path, seed: int) -> dict[str, float]:
     displacement (m) and the door handle's final angle (rad).
     """
     import advgame
-    from advgame.episodes import build_policies
-    from advgame.suite import run_protagonist
+    from advgame.core.episodes import build_policies
+    from advgame.evaluation.suite import run_protagonist
 
     run = out / "runs" / f"alternation-s{seed}"
     game = advgame.make(SCENARIO, preset="default", phase="eval")

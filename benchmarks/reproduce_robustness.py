@@ -38,7 +38,7 @@ SIGMAS = (0.0, 0.1, 0.15)
 def _train_seed(seed: int, steps: int, out: str, scenario: str, attack: str) -> dict[str, str]:
     import torch
 
-    from advgame.suite import _train_or_resume
+    from advgame.evaluation.suite import _train_or_resume
     from advgame.training import METHODS, TrainConfig
 
     torch.set_num_threads(1)
@@ -69,7 +69,7 @@ def _mean_return(
     scenario: str, kwargs: dict, protagonist: Any, adversaries: dict, seed: int, episodes: int
 ) -> float:
     import advgame
-    from advgame.episodes import rollout
+    from advgame.core.episodes import rollout
 
     game = advgame.make(scenario, phase="eval", **kwargs)
     results = rollout(
@@ -88,8 +88,8 @@ def _evaluate_seed(
     import torch
 
     from advgame.adversaries import GaussianAdversary, RandomAdversary
-    from advgame.exploit import best_responses
-    from advgame.suite import run_protagonist
+    from advgame.evaluation.exploit import best_responses
+    from advgame.evaluation.suite import run_protagonist
 
     torch.set_num_threads(1)
     prot = {name: run_protagonist(Path(d))[1] for name, d in dirs.items()}

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.payoff import ci95
+from advgame.evaluation.payoff import ci95
 
 CONDITIONS = (
     "nominal",
@@ -52,8 +52,8 @@ def _job(algo: str, condition: str, seed: int, args: argparse.Namespace) -> dict
     import torch
 
     import advgame
-    from advgame.episodes import rollout
-    from advgame.suite import _train_or_resume, run_protagonist
+    from advgame.core.episodes import rollout
+    from advgame.evaluation.suite import _train_or_resume, run_protagonist
     from advgame.training import TrainConfig
 
     logging.basicConfig(level=logging.WARNING)

@@ -10,7 +10,7 @@ if __name__ != "advgame.scenarios":  # pragma: no cover - packaging guard
         "(pip install -e . from the repository root), not as the bare `scenarios`."
     )
 
-from advgame.registry import ScenarioSpec, register
+from advgame.core.registry import ScenarioSpec, register
 from advgame.scenarios.mamujoco_list import register_all as _register_mamujoco
 
 _MUJOCO = "advgame.scenarios.mujoco"

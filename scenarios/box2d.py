@@ -8,8 +8,8 @@ observation budget is in pixel intensity units (0-255).
 
 from __future__ import annotations
 
+from advgame.core.registry import Preset
 from advgame.disruptors import ActionDisruptor, ObservationDisruptor, RewardDisruptor
-from advgame.registry import Preset
 from advgame.scenarios.common import gaussian_presets, make_task
 
 __all__ = ["make_task", "presets"]

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from advgame.adversaries import GaussianAdversary, UniformAdversary
+from advgame.core.registry import Preset
+from advgame.core.schedule import Schedule
+from advgame.core.task import GymTask
 from advgame.disruptors import ActionDisruptor, ObservationDisruptor, RewardDisruptor
-from advgame.registry import Preset
-from advgame.schedule import Schedule
-from advgame.task import GymTask
 
 __all__ = ["gaussian_presets", "make_task"]
 

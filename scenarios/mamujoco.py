@@ -28,6 +28,8 @@ from typing import Any
 import gymnasium as gym
 
 from advgame.adversaries import GaussianAdversary
+from advgame.core.registry import Preset
+from advgame.core.task import MujocoSim, StepResult, TaskBase
 from advgame.disruptors import (
     ActionDisruptor,
     ForceDisruptor,
@@ -35,12 +37,10 @@ from advgame.disruptors import (
     RewardDisruptor,
 )
 from advgame.errors import AdvgameError, ConfigError, UnknownScenarioError, did_you_mean
-from advgame.registry import Preset
 from advgame.scenarios.common import gaussian_presets
 from advgame.scenarios.mamujoco_list import VARIANTS
 from advgame.scenarios.mujoco import FORCES as _GYM_FORCES
 from advgame.scenarios.mujoco import dynamics_shift  # the single-agent ±20 % shift, shared
-from advgame.task import MujocoSim, StepResult, TaskBase
 
 __all__ = ["FIRST_AGENT", "FORCES", "MaMuJoCoTask", "make_task", "presets"]
 

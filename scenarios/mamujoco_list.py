@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from advgame.core.registry import ScenarioSpec, list_scenarios, register, scenario_spec
 from advgame.errors import ConfigError
-from advgame.registry import ScenarioSpec, list_scenarios, register, scenario_spec
 
 __all__ = ["BROKEN", "FAMILY", "UNAVAILABLE", "VARIANTS", "Variant", "register_all", "working"]
 

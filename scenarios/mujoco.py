@@ -21,6 +21,8 @@ Presets of every MuJoCo scenario:
 from __future__ import annotations
 
 from advgame.adversaries import ConstantAdversary, SinusoidAdversary, UniformAdversary
+from advgame.core.registry import Preset
+from advgame.core.schedule import Schedule
 from advgame.disruptors import (
     ActionDisruptor,
     DynamicsDisruptor,
@@ -29,9 +31,7 @@ from advgame.disruptors import (
     Param,
     RewardDisruptor,
 )
-from advgame.registry import Preset
 from advgame.scenarios.common import gaussian_presets, make_task
-from advgame.schedule import Schedule
 
 __all__ = ["ATLA_EPS", "FORCES", "dynamics_shift", "make_task", "presets"]
 

@@ -21,6 +21,8 @@ from __future__ import annotations
 from typing import Any
 
 from advgame.adversaries import GaussianAdversary
+from advgame.core.registry import Preset
+from advgame.core.schedule import Schedule
 from advgame.disruptors import (
     ActionDisruptor,
     ArmDisruptor,
@@ -31,8 +33,6 @@ from advgame.disruptors import (
     Shift,
     WorkspaceDisruptor,
 )
-from advgame.registry import Preset
-from advgame.schedule import Schedule
 
 __all__ = ["ENVS", "door_causal", "lift_causal", "make_task", "presets", "table_shift"]
 

@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.task import MujocoSim, StepResult, TaskBase
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
-from advgame.task import MujocoSim, StepResult, TaskBase
 
 __all__ = ["AGENT", "RobosuiteSim", "RobosuiteTask", "flat_keys"]
 

@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 
 from advgame.adversaries import GaussianAdversary
+from advgame.core.registry import Preset
+from advgame.core.task import GymTask, StepResult
 from advgame.disruptors import (
     ActionDisruptor,
     ForceDisruptor,
@@ -41,9 +43,7 @@ from advgame.disruptors import (
     RewardDisruptor,
 )
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
-from advgame.registry import Preset
 from advgame.scenarios.mujoco import FORCES, dynamics_shift
-from advgame.task import GymTask, StepResult
 
 __all__ = [
     "CONSTRAINTS",

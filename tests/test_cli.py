@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from advgame.cli import main
-from advgame.config import load_json, save_json
-from advgame.registry import list_scenarios, scenario_spec
+from advgame.core.config import load_json, save_json
+from advgame.core.registry import list_scenarios, scenario_spec
 from advgame.training import METHODS, TrainConfig
 
 PNG = b"\x89PNG\r\n\x1a\n"

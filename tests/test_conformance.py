@@ -20,7 +20,7 @@ from gymnasium import spaces
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import advgame
-from advgame.registry import scenario_spec
+from advgame.core.registry import scenario_spec
 
 SLOW = {"CarRacing-v3"}
 """Scenarios whose reset is expensive (CarRacing builds a track): fewer cycles."""

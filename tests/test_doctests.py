@@ -27,9 +27,11 @@ MODULES = _modules()
 
 
 def test_the_walk_finds_the_core_modules() -> None:
-    assert {"advgame.game", "advgame.disruptors.observation", "advgame.adversaries.noise"} <= set(
-        MODULES
-    )
+    assert {
+        "advgame.core.game",
+        "advgame.disruptors.observation",
+        "advgame.adversaries.noise",
+    } <= set(MODULES)
     assert advgame.__version__
 
 

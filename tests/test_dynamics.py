@@ -25,9 +25,9 @@ import pytest
 
 import advgame
 from advgame.adversaries import SinusoidAdversary
+from advgame.core.episodes import rollout
+from advgame.core.schedule import Schedule
 from advgame.disruptors import DynamicsDisruptor, ForceDisruptor, Param
-from advgame.episodes import rollout
-from advgame.schedule import Schedule
 
 P = "protagonist"
 DYN = "dynamics_adversary"

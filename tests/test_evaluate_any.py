@@ -21,7 +21,7 @@ from advgame.evaluation import (
     check_protagonists,
     sb3_protagonist,
 )
-from advgame.population import Population
+from advgame.training.population import Population
 
 TINY_ATLA = [
     "--scenario",
@@ -121,8 +121,8 @@ def test_without_its_normalizer_the_model_plays_other_episodes(plain_sb3: Path) 
     obs = gym.make("Hopper-v5").reset(seed=0)[0]
     info = check_protagonists("Hopper-v5", {"raw": raw, "normed": normed})
     assert set(info) == {"raw", "normed"}
-    from advgame.episodes import build_policies
-    from advgame.registry import make
+    from advgame.core.episodes import build_policies
+    from advgame.core.registry import make
 
     game = make("Hopper-v5", disruptors={})
     a = build_policies(game, {"protagonist": raw})["protagonist"].act(obs)

@@ -1,4 +1,4 @@
-"""`advgame.evaluation` and `advgame.report`: metric math, jobs, real payoff tables, reports."""
+"""`advgame.evaluation` and `advgame.evaluation.report`: metric math, jobs, real payoff tables, reports."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 
 import advgame
 from advgame.adversaries import ConstantAdversary, GaussianAdversary, UniformAdversary
-from advgame.episodes import rollout
+from advgame.core.episodes import rollout
 from advgame.errors import ConfigError, UnknownNameError, UnknownScenarioError
 from advgame.evaluation import (
     SEED_STRIDE,
@@ -28,7 +28,12 @@ from advgame.evaluation import (
     shift_grid,
     worst_case,
 )
-from advgame.report import plot_budget_curve, plot_heatmap, plot_training_curves, write_report
+from advgame.evaluation.report import (
+    plot_budget_curve,
+    plot_heatmap,
+    plot_training_curves,
+    write_report,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n"

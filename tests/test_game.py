@@ -1,6 +1,6 @@
 """The Game's contract: move order, whose action counts, true payoffs, determinism, clear errors.
 
-All on real simulators (MuJoCo Hopper-v5, Box2D LunarLander-v3); see `advgame.game` for the
+All on real simulators (MuJoCo Hopper-v5, Box2D LunarLander-v3); see `advgame.core.game` for the
 sense/act moves these tests pin down.
 """
 
@@ -15,6 +15,9 @@ import pytest
 
 import advgame
 from advgame.adversaries import GaussianAdversary
+from advgame.core.episodes import filler_action, rollout
+from advgame.core.policy import AgentInfo
+from advgame.core.schedule import Schedule
 from advgame.disruptors import (
     ActionDisruptor,
     DynamicsDisruptor,
@@ -23,7 +26,6 @@ from advgame.disruptors import (
     Param,
     RewardDisruptor,
 )
-from advgame.episodes import filler_action, rollout
 from advgame.errors import (
     ActionError,
     AdvgameError,
@@ -32,8 +34,6 @@ from advgame.errors import (
     UnknownNameError,
     UnknownScenarioError,
 )
-from advgame.policy import AgentInfo
-from advgame.schedule import Schedule
 
 P = "protagonist"
 OBS, ACT, REW, DYN, FORCE = (
@@ -421,7 +421,7 @@ def test_unknown_scenario_suggests_the_nearest_id(bad: str, good: str) -> None:
         lambda: advgame.make(bad), UnknownScenarioError, repr(bad), f'Did you mean "{good}"?'
     )
     assert str(err).startswith("No scenario")  # not a KeyError repr
-    _raises(lambda: advgame.registry.scenario_spec(bad), UnknownScenarioError, f'"{good}"')
+    _raises(lambda: advgame.core.registry.scenario_spec(bad), UnknownScenarioError, f'"{good}"')
 
 
 CONFIG_ERRORS: list[Any] = [

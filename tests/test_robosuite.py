@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import advgame
+from advgame.core.schedule import Schedule
 from advgame.disruptors import (
     ArmDisruptor,
     DynamicsDisruptor,
@@ -30,7 +31,6 @@ from advgame.disruptors import (
     WorkspaceDisruptor,
 )
 from advgame.errors import ConfigError, UnknownNameError
-from advgame.schedule import Schedule
 
 
 @pytest.fixture(scope="session")
@@ -178,7 +178,7 @@ def test_arm_budget_scales_the_command_and_needs_an_external_robot(warm: None) -
 
 
 def test_rarl_training_fraction_scales_the_arm_budget() -> None:
-    from advgame.trainer import scaled
+    from advgame.training.trainer import scaled
 
     assert scaled(ArmDisruptor(scale=0.8), 0.5).scale == pytest.approx(0.4)
 
@@ -381,7 +381,7 @@ def test_workspace_adversary_learns_one_decision_per_episode(
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_checker import check_env
 
-    from advgame.views import SingleAgentView
+    from advgame.core.views import SingleAgentView
 
     game = advgame.make("RS-Lift", preset="lift-causal", max_episode_steps=3)
     view = SingleAgentView(game, "workspace_adversary", {"protagonist": _hold})

@@ -27,13 +27,13 @@ import torch
 
 import advgame
 import advgame.cli
-import advgame.registry
+import advgame.core.registry
 from advgame import ObservationDisruptor, RewardDisruptor
 from advgame.agents.safe import SAFE_LEARNERS, CRPOConfig, PCRPOConfig, PPOLagConfig
 from advgame.agents.safe_ppo import project
+from advgame.core.team import team_factory
 from advgame.errors import ConfigError, UnknownNameError
 from advgame.evaluation import PayoffTable
-from advgame.team import team_factory
 from advgame.training import learner_config
 
 REACHER = "SafetyReacher-v5"
@@ -102,7 +102,7 @@ def test_cost_disruptor_moves_only_the_observed_cost_within_its_budget() -> None
 
 
 def test_safe_presets_declare_a_cost_weight_and_give_the_papers_settings() -> None:
-    presets = advgame.registry.scenario_spec("SafetyWalker2d-v5").load_presets()
+    presets = advgame.core.registry.scenario_spec("SafetyWalker2d-v5").load_presets()
     names = {"default", "full", "state-gauss-0.3", "action-gauss-0.15", "action-gauss-0.3"}
     assert names | {"cost-gauss-0.15", "cost-gauss-0.3"} <= set(presets)
     assert all(p.cost_weight > 0 for p in presets.values())
@@ -233,8 +233,8 @@ def test_a_constrained_run_killed_by_sigkill_resumes_to_the_end(tmp_path: Path) 
 
 
 def test_learned_adversaries_train_against_a_constrained_protagonist(tmp_path: Path) -> None:
-    from advgame.population import Population
     from advgame.training import TrainConfig, train
+    from advgame.training.population import Population
 
     cfg = TrainConfig(
         scenario=REACHER,
@@ -260,7 +260,7 @@ def test_learned_adversaries_train_against_a_constrained_protagonist(tmp_path: P
 
 def test_the_report_gains_episode_cost_and_constraint_satisfaction(tmp_path: Path) -> None:
     from advgame.evaluation import AdversarySetup, evaluate, population_jobs
-    from advgame.report import write_report
+    from advgame.evaluation.report import write_report
 
     def spin(obs: Any) -> list[float]:  # full torque: the fingertip exceeds the speed limit
         return [1.0, 1.0]
@@ -301,7 +301,7 @@ def test_save_and_load_restore_the_multiplier_and_the_learner(tmp_path: Path) ->
 
 
 def test_the_report_limit_comes_from_the_runs_learner_configs(tmp_path: Path) -> None:
-    from advgame.report import DEFAULT_COST_LIMIT, runs_cost_limit
+    from advgame.evaluation.report import DEFAULT_COST_LIMIT, runs_cost_limit
 
     for name, cfg in {
         "tight": {"protagonist_algo": "crpo", "protagonist_hparams": {"cost_limit": 4.0}},

@@ -9,7 +9,7 @@ from stable_baselines3 import PPO
 
 import advgame
 from advgame import adversaries as adv
-from advgame.views import SingleAgentView
+from advgame.core.views import SingleAgentView
 
 TIMESTEPS = 2048
 

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from advgame.cli import main
-from advgame.columns import adversary_columns, default_threat
 from advgame.errors import ConfigError, UnknownNameError
+from advgame.evaluation.columns import adversary_columns, default_threat
 
 TINY = [
     "--scenario", "Hopper-v5", "--iterations", "1", "--protagonist-steps", "64",

@@ -24,16 +24,16 @@ import numpy as np
 import pytest
 import torch
 
-import advgame.loop
-import advgame.registry
+import advgame.core.registry
+import advgame.training.loop
 from advgame.adversaries import ConstantAdversary, ZeroAdversary
-from advgame.checkpoint import SB3Checkpoint, _algo_class
 from advgame.cli import main
-from advgame.config import load_json
-from advgame.episodes import rollout
+from advgame.core.config import load_json
+from advgame.core.episodes import rollout
 from advgame.errors import ConfigError
-from advgame.population import Member, Population
 from advgame.training import METHODS, TrainConfig, learner_config, train
+from advgame.training.checkpoint import SB3Checkpoint, _algo_class
+from advgame.training.population import Member, Population
 
 HOPPER = "Hopper-v5"
 PENDULUM = "InvertedPendulum-v5"
@@ -170,7 +170,7 @@ def test_population_members_load_and_play(atla_run: Path) -> None:
         assert isinstance(m.spec, SB3Checkpoint)
         assert Path(m.spec.path).is_file() and ".partial" not in m.spec.path
         assert Path(m.spec.path).parent.name == f"iter_{m.iteration:04d}"
-    game = advgame.registry.make(HOPPER, preset="atla", phase="eval")
+    game = advgame.core.registry.make(HOPPER, preset="atla", phase="eval")
     protagonist = final_protagonist(atla_run)
     returns = {}
     for m in pop:
@@ -180,7 +180,7 @@ def test_population_members_load_and_play(atla_run: Path) -> None:
     game.close()
     # the no-op member leaves the task nominal; a trained attacker perturbs it
     (nominal,) = rollout(
-        advgame.registry.make(HOPPER, preset="atla", phase="eval"),
+        advgame.core.registry.make(HOPPER, preset="atla", phase="eval"),
         {"protagonist": protagonist},
         seed=3,
     )
@@ -310,15 +310,15 @@ def _spy_on_make(monkeypatch: pytest.MonkeyPatch) -> list[tuple[dict[str, Any], 
     """Record every game the loop builds (training views and quick evaluation); the real
     `make` still builds them."""
     made: list[tuple[dict[str, Any], Any]] = []
-    real = advgame.registry.make
+    real = advgame.core.registry.make
 
     def recording(scenario_id: str, **kwargs: Any) -> Any:
         game = real(scenario_id, **kwargs)
         made.append((kwargs, game))
         return game
 
-    monkeypatch.setattr(advgame.registry, "make", recording)
-    monkeypatch.setattr(advgame.loop, "make", recording)
+    monkeypatch.setattr(advgame.core.registry, "make", recording)
+    monkeypatch.setattr(advgame.training.loop, "make", recording)
     return made
 
 
@@ -388,7 +388,7 @@ def test_atla_with_a_td3_protagonist_and_a_sac_adversary(tmp_path: Path) -> None
         "observation_adversary", learned_only=True
     )[-1:]
     assert adversary.spec.algo == "sac" and adversary.iteration == 1
-    game = advgame.registry.make(HOPPER, preset="atla", phase="eval")
+    game = advgame.core.registry.make(HOPPER, preset="atla", phase="eval")
     (result,) = rollout(
         game, {"protagonist": final_protagonist(run), "observation_adversary": adversary.spec}, 0
     )

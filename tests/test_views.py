@@ -1,4 +1,4 @@
-"""`advgame.views.SingleAgentView`: every side of a game as a checked, reproducible env."""
+"""`advgame.core.views.SingleAgentView`: every side of a game as a checked, reproducible env."""
 
 from __future__ import annotations
 
@@ -16,11 +16,11 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 import advgame
 from advgame import adversaries as adv
+from advgame.core.policy import ConstantPolicy
+from advgame.core.schedule import Schedule
+from advgame.core.views import SingleAgentView, view_factory
 from advgame.disruptors import ActionDisruptor, ObservationDisruptor, RewardDisruptor
 from advgame.errors import ConfigError
-from advgame.policy import ConstantPolicy
-from advgame.schedule import Schedule
-from advgame.views import SingleAgentView, view_factory
 
 # Ant episodes are cut short: a per-episode dynamics adversary's single view step plays the
 # whole episode, and 1000 Ant steps per view step would make the checkers slow.

@@ -40,7 +40,7 @@ def test_setup_move_moves_the_goal_before_the_protagonist_sees_it() -> None:
 
 
 def test_eval_only_schedule_skips_the_setup_move_in_training() -> None:
-    from advgame.schedule import Schedule
+    from advgame.core.schedule import Schedule
 
     spec = WorkspaceDisruptor(shifts=[GOAL], schedule=Schedule(phase="eval"))
     game = advgame.make("Pusher-v5", disruptors=[spec])
@@ -58,6 +58,6 @@ def test_bad_workspace_specs_say_what_is_wrong() -> None:
     with pytest.raises(ConfigError, match="moves and recolours nothing"):
         Shift("nothing")
     with pytest.raises(ConfigError, match="persist"):
-        from advgame.schedule import Schedule
+        from advgame.core.schedule import Schedule
 
         WorkspaceDisruptor(shifts=[GOAL], schedule=Schedule(persist=True))

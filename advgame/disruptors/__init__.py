@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from advgame.core.schedule import Schedule
 from advgame.disruptors.action import ActionDisruptor
 from advgame.disruptors.arm import ArmDisruptor
 from advgame.disruptors.base import Disruptor, DisruptorSpec
@@ -18,7 +19,6 @@ from advgame.disruptors.observation import ObservationDisruptor
 from advgame.disruptors.reward import RewardDisruptor
 from advgame.disruptors.workspace import Shift, WorkspaceDisruptor
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
-from advgame.schedule import Schedule
 
 __all__ = [
     "KINDS",

@@ -19,7 +19,7 @@ from advgame.disruptors.base import Disruptor, DisruptorSpec, as_budget
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:
-    from advgame.task import MujocoSim, TaskBase
+    from advgame.core.task import MujocoSim, TaskBase
 
 __all__ = ["ArmDisruptor", "ArmRuntime"]
 

@@ -24,11 +24,11 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.schedule import Schedule
 from advgame.errors import ActionError, BudgetError, UnknownNameError, did_you_mean
-from advgame.schedule import Schedule
 
 if TYPE_CHECKING:
-    from advgame.task import MujocoSim, TaskBase
+    from advgame.core.task import MujocoSim, TaskBase
 
 __all__ = [
     "AdditiveDisruptor",

@@ -20,7 +20,7 @@ from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
 if TYPE_CHECKING:
-    from advgame.task import MujocoSim, TaskBase
+    from advgame.core.task import MujocoSim, TaskBase
 
 __all__ = ["DynamicsDisruptor", "DynamicsRuntime", "Param"]
 

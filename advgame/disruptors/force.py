@@ -12,7 +12,7 @@ from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:
-    from advgame.task import MujocoSim, TaskBase
+    from advgame.core.task import MujocoSim, TaskBase
 
 __all__ = ["ForceDisruptor", "ForceRuntime"]
 

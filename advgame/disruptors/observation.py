@@ -13,7 +13,7 @@ from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget,
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
 if TYPE_CHECKING:
-    from advgame.task import TaskBase
+    from advgame.core.task import TaskBase
 
 __all__ = ["ObservationDisruptor", "ObservationRuntime"]
 

@@ -16,7 +16,7 @@ from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget,
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:
-    from advgame.task import TaskBase
+    from advgame.core.task import TaskBase
 
 __all__ = ["RewardDisruptor", "RewardRuntime"]
 

@@ -25,7 +25,7 @@ from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import BudgetError, ConfigError
 
 if TYPE_CHECKING:
-    from advgame.task import MujocoSim, TaskBase
+    from advgame.core.task import MujocoSim, TaskBase
 
 __all__ = ["Shift", "WorkspaceDisruptor", "WorkspaceRuntime"]
 

@@ -6,7 +6,7 @@ As in PSRO::
     update_adversaries()    # train each learned adversary vs the frozen protagonist
     snapshot()              # save the adversaries, grow the population
 
-`advgame.loop.Run` drives a `Trainer` through its iterations and persists them.
+`advgame.training.loop.Run` drives a `Trainer` through its iterations and persists them.
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.registry import make
 from advgame.errors import ConfigError
-from advgame.learning import EpisodeStats
-from advgame.population import Member, Population
-from advgame.registry import make
-from advgame.train_config import PROTAGONISTS, TEAM_ALGOS, TrainConfig
+from advgame.training.config import PROTAGONISTS, TEAM_ALGOS, TrainConfig
+from advgame.training.learning import EpisodeStats
+from advgame.training.population import Member, Population
 
 __all__ = ["Trainer", "scaled"]
 

@@ -21,8 +21,8 @@ all of it and writes a self-contained results folder with its report::
     cols = adversary_columns("Hopper-v5", ["preset:state-gauss-0.1", "population:runs/atla"])
     evaluate_policies("Hopper-v5", {"mine": mine}, "results", adversaries=cols)
 
-Jobs and their builders live in `advgame.jobs`, tables and metrics in `advgame.payoff`,
-protagonists in `advgame.protagonists`, columns in `advgame.columns`; this module re-exports
+Jobs and their builders live in `advgame.evaluation.jobs`, tables and metrics in `advgame.evaluation.payoff`,
+protagonists in `advgame.evaluation.protagonists`, columns in `advgame.evaluation.columns`; this module re-exports
 them, so ``from advgame.evaluation import ...`` reaches all of them.
 """
 
@@ -39,9 +39,9 @@ from collections.abc import Iterable, Iterator, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
-from advgame.columns import COLUMN_KINDS, adversary_columns, describe_column
 from advgame.errors import ConfigError
-from advgame.jobs import (
+from advgame.evaluation.columns import COLUMN_KINDS, adversary_columns, describe_column
+from advgame.evaluation.jobs import (
     SEED_STRIDE,
     AdversarySetup,
     EvalJob,
@@ -49,7 +49,7 @@ from advgame.jobs import (
     population_jobs,
     shift_grid,
 )
-from advgame.payoff import (
+from advgame.evaluation.payoff import (
     COLUMNS,
     NOMINAL,
     PayoffTable,
@@ -58,7 +58,7 @@ from advgame.payoff import (
     degradation,
     worst_case,
 )
-from advgame.protagonists import (
+from advgame.evaluation.protagonists import (
     check_protagonists,
     run_protagonist,
     sb3_protagonist,
@@ -81,7 +81,7 @@ __all__ = [
     "degradation",
     "describe_column",
     "evaluate",
-    "evaluate_policies",  # noqa: F822 - lazily from advgame.suite (module __getattr__): no cycle
+    "evaluate_policies",
     "population_jobs",
     "run_job",
     "run_protagonist",
@@ -95,15 +95,15 @@ log = logging.getLogger(__name__)
 
 
 def __getattr__(name: str) -> Any:
-    """`evaluate_policies` lives in `advgame.suite` (it writes reports), loaded on first use."""
+    """`evaluate_policies` lives in `advgame.evaluation.suite` (it writes reports), loaded on first use."""
     if name == "evaluate_policies":
-        from advgame.suite import evaluate_policies
+        from advgame.evaluation.suite import evaluate_policies
 
         return evaluate_policies
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-_PRELOAD = ("advgame.evaluation", "advgame.episodes", "advgame.scenarios.mujoco", "mujoco")
+_PRELOAD = ("advgame.evaluation", "advgame.core.episodes", "advgame.scenarios.mujoco", "mujoco")
 
 
 @contextlib.contextmanager
@@ -127,7 +127,7 @@ def run_job(job: EvalJob) -> list[dict[str, Any]]:
     other seeds; torch, if imported, runs on one thread meanwhile.
     """
     import advgame
-    from advgame.episodes import build_policies, rollout
+    from advgame.core.episodes import build_policies, rollout
 
     game = advgame.make(job.scenario, **job.make_kwargs)
     prot = job.protagonist_spec

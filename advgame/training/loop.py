@@ -13,18 +13,18 @@ from typing import Any
 
 import numpy as np
 
-from advgame.episodes import filler_action, rollout
-from advgame.learning import EpisodeStats, Side
-from advgame.policy import ConstantPolicy
-from advgame.population import Member, Population
-from advgame.registry import load, make
-from advgame.train_config import _ZERO, PROTAGONISTS, learner_config
-from advgame.trainer import Trainer
-from advgame.views import view_factory
+from advgame.core.episodes import filler_action, rollout
+from advgame.core.policy import ConstantPolicy
+from advgame.core.registry import load, make
+from advgame.core.views import view_factory
+from advgame.training.config import _ZERO, PROTAGONISTS, learner_config
+from advgame.training.learning import EpisodeStats, Side
+from advgame.training.population import Member, Population
+from advgame.training.trainer import Trainer
 
 __all__ = ["Run"]
 
-_TEAM_FACTORY = "advgame.team:team_factory"
+_TEAM_FACTORY = "advgame.core.team:team_factory"
 
 log = logging.getLogger(__name__)
 

@@ -334,7 +334,7 @@ def write_report(
 
 
 def adversary_listing(columns: Mapping[str, Mapping[str, Any]]) -> str:
-    """Markdown: which adversaries formed each column (from `advgame.columns.describe_column`)."""
+    """Markdown: which adversaries formed each column (from `advgame.evaluation.columns.describe_column`)."""
     lines = [
         "Each column of the payoff matrix: how its game was made and who played which adversary."
     ]

@@ -22,8 +22,8 @@ from advgame.errors import (
 )
 
 if TYPE_CHECKING:
+    from advgame.core.game import Game
     from advgame.disruptors.base import DisruptorSpec
-    from advgame.game import Game
 
 __all__ = ["Preset", "ScenarioSpec", "list_scenarios", "load", "make", "register", "scenario_spec"]
 
@@ -163,7 +163,7 @@ def make(
         (('protagonist',), ('observation_adversary',))
 
     """
-    from advgame.game import Game
+    from advgame.core.game import Game
 
     spec = scenario_spec(scenario_id)
     spec.check_installed()

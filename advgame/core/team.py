@@ -1,6 +1,6 @@
 """The protagonist team of a game as a PettingZoo `ParallelEnv`, every adversary frozen inside it.
 
-`TeamView` is the multi-agent sibling of `advgame.views.SingleAgentView`: its agents are all the
+`TeamView` is the multi-agent sibling of `advgame.core.views.SingleAgentView`: its agents are all the
 protagonists of a game (MaMuJoCo's ``"agent_0"``, ``"agent_1"``, ...), and every adversary plays
 an embedded policy. One `TeamView.step` is one protagonist step of the Disrupted-MDP: the act
 move the protagonists' actions count in, then any sense move before their next decision (the
@@ -22,9 +22,9 @@ from typing import Any, ClassVar
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from advgame.episodes import build_policies, reseed_policies
+from advgame.core.episodes import build_policies, reseed_policies
+from advgame.core.game import Game, Move
 from advgame.errors import ActionError, ConfigError
-from advgame.game import Game, Move
 
 __all__ = ["TeamView", "team_factory"]
 
@@ -219,7 +219,7 @@ class _Placeholder:
 def _build_team(
     scenario_id: str, policies: Mapping[str, Any], make_kwargs: Mapping[str, Any]
 ) -> TeamView:
-    from advgame.registry import make
+    from advgame.core.registry import make
 
     return TeamView(make(scenario_id, **make_kwargs), policies)
 

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.policy import AgentInfo
 from advgame.errors import ConfigError
-from advgame.policy import AgentInfo
 
 __all__ = ["ALGOS", "Normalizer", "SB3Checkpoint", "SB3Policy", "load_model", "load_normalizer"]
 
@@ -106,7 +106,7 @@ def _vecnormalize_stats(path: str) -> Normalizer | None:
 class SB3Policy:
     """An SB3 model's policy, behind the observation normalizer it was trained with.
 
-    It is also a `advgame.policy.WhiteBox`: attacks may differentiate its networks (PPO's
+    It is also a `advgame.core.policy.WhiteBox`: attacks may differentiate its networks (PPO's
     Gaussian actor and value head; SAC's and TD3's actor and Q critic) through the same frozen
     normalizer, without training them.
 
@@ -181,7 +181,7 @@ class SB3Policy:
             out = policy.unscale_action(out) if self._squash else np.clip(out, *self._box)
         return out
 
-    # -- white-box access (`advgame.policy.WhiteBox`): forward passes only, nothing trained ----
+    # -- white-box access (`advgame.core.policy.WhiteBox`): forward passes only, nothing trained ----
     def _features(self, obs: Any) -> Any:
         """Raw observation batch -> the network's input (normalized and clipped as in training)."""
         import torch

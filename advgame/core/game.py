@@ -33,9 +33,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from advgame.disruptors.base import Disruptor, DisruptorSpec
-from advgame.errors import ActionError, ConfigError, did_you_mean
-from advgame.moves import (
+from advgame.core.moves import (
     ACT,
     SENSE,
     Hooks,
@@ -44,9 +42,11 @@ from advgame.moves import (
     package,
     protagonist_action,
 )
-from advgame.policy import AgentInfo
-from advgame.schedule import PHASES, Schedule
-from advgame.task import TaskBase
+from advgame.core.policy import AgentInfo
+from advgame.core.schedule import PHASES, Schedule
+from advgame.core.task import TaskBase
+from advgame.disruptors.base import Disruptor, DisruptorSpec
+from advgame.errors import ActionError, ConfigError, did_you_mean
 
 __all__ = ["Game", "Move"]
 

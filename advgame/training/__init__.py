@@ -6,8 +6,8 @@ Each iteration reads as three named steps, as in PSRO::
     update_adversaries()    # train each learned adversary vs the frozen protagonist
     snapshot()              # checkpoint both sides, grow the population, evaluate, log
 
-The chain points one way: `advgame.train_config` (`TrainConfig`, `METHODS`,
-`learner_config`) -> `advgame.trainer` (`Trainer`) -> `advgame.loop` (`Run`: persistence,
+The chain points one way: `advgame.training.config` (`TrainConfig`, `METHODS`,
+`learner_config`) -> `advgame.training.trainer` (`Trainer`) -> `advgame.training.loop` (`Run`: persistence,
 resume, logging) -> this module (`train`, `resume`), which re-exports the public names.
 
 A run directory holds everything: ``config.json``, ``state.json`` (the last finished
@@ -20,11 +20,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from advgame.config import load_json, save_json
+from advgame.core.config import load_json, save_json
 from advgame.errors import ConfigError
-from advgame.loop import Run
-from advgame.train_config import METHODS, TEAM_ALGOS, TrainConfig, learner_config
-from advgame.trainer import Trainer
+from advgame.training.config import METHODS, TEAM_ALGOS, TrainConfig, learner_config
+from advgame.training.loop import Run
+from advgame.training.trainer import Trainer
 
 __all__ = ["METHODS", "TEAM_ALGOS", "TrainConfig", "Trainer", "learner_config", "resume", "train"]
 

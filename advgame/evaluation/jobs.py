@@ -18,7 +18,7 @@ from typing import Any, cast
 import numpy as np
 
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
-from advgame.payoff import COLUMNS, NOMINAL
+from advgame.evaluation.payoff import COLUMNS, NOMINAL
 
 __all__ = [
     "SEED_STRIDE",
@@ -82,7 +82,7 @@ class EvalJob:
     """Extra scalar columns copied into every row (e.g. ``{"budget": 0.1}``)."""
 
     def __post_init__(self) -> None:
-        from advgame.registry import scenario_spec
+        from advgame.core.registry import scenario_spec
 
         scenario_spec(self.scenario)  # an unknown id fails here, with a "did you mean"
         for name in ("protagonist", "adversary"):
@@ -130,7 +130,7 @@ class AdversarySetup:
     @classmethod
     def from_preset(cls, scenario: str, preset: str) -> AdversarySetup:
         """Return a preset played by its suggested adversaries (`Preset.adversaries`)."""
-        from advgame.registry import scenario_spec
+        from advgame.core.registry import scenario_spec
 
         presets = scenario_spec(scenario).load_presets()
         if preset not in presets:

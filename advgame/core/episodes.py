@@ -14,11 +14,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.policy import ConstantPolicy, Policy, as_policy
 from advgame.errors import ConfigError
-from advgame.policy import ConstantPolicy, Policy, as_policy
 
 if TYPE_CHECKING:
-    from advgame.game import Game
+    from advgame.core.game import Game
 
 __all__ = ["EpisodeResult", "build_policies", "filler_action", "reseed_policies", "rollout"]
 

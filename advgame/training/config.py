@@ -15,8 +15,8 @@ import typing
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from advgame.core.registry import load
 from advgame.errors import ConfigError
-from advgame.registry import load
 
 __all__ = ["METHODS", "PROTAGONISTS", "SAFE_ALGOS", "TEAM_ALGOS", "TrainConfig", "learner_config"]
 
@@ -26,7 +26,7 @@ _SAFE_LEARNERS = "advgame.agents.safe:SAFE_LEARNERS"
 SAFE_ALGOS = ("ppo-lag", "crpo", "pcrpo")
 """Constrained protagonist learners (safe scenarios): PPO-Lagrangian, CRPO, PCRPO."""
 TEAM_ALGOS = ("mappo", "ippo", *SAFE_ALGOS)
-"""Protagonist learners that train the whole protagonist team on `advgame.team.TeamView`s
+"""Protagonist learners that train the whole protagonist team on `advgame.core.team.TeamView`s
 (our torch learners) instead of one SB3 agent."""
 PROTAGONISTS = "protagonists"
 """The key of the protagonist side in `Trainer.sides` (one agent or a whole team)."""
@@ -139,7 +139,7 @@ class TrainConfig:
 
 def learner_config(algo: str, overrides: dict[str, Any] | None) -> Any:
     """The learner config of `algo` with `overrides` applied (unknown names are an error)."""
-    from advgame.config import from_dict, to_dict
+    from advgame.core.config import from_dict, to_dict
 
     learners = {**load(_LEARNERS)}
     if algo in TEAM_ALGOS:

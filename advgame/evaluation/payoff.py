@@ -24,7 +24,7 @@ NOMINAL = "nominal"
 """The adversary name of the undisrupted game, the reference of `degradation`."""
 COLUMNS: tuple[str, ...] = ("scenario", "protagonist", "adversary", "seed", "episode")
 COLUMNS += ("true_return", "observed_return", "cost", "payoff", "length", "clipped", "terminated")
-"""The columns of every row (`advgame.episodes.EpisodeResult`, clips summed); tags add more."""
+"""The columns of every row (`advgame.core.episodes.EpisodeResult`, clips summed); tags add more."""
 _INT, _STR = {"seed", "episode", "length", "clipped"}, {"scenario", "protagonist", "adversary"}
 # Student t 0.975 quantiles for df = 1..30 (95 % two-sided intervals); 1.96 beyond.
 _T975: tuple[float, ...] = (

@@ -1,7 +1,7 @@
 """Ready-made workflows: evaluate fixed policies against chosen adversaries, and the demo.
 
 `evaluate_policies` plays any protagonists (run finals, SB3 models trained elsewhere, teams,
-callables) against adversary columns named by specs (`advgame.columns`: by default the nominal
+callables) against adversary columns named by specs (`advgame.evaluation.columns`: by default the nominal
 task, the paper's random attacks, a scheduled shift and every run's latest learned
 adversaries), with a budget sweep, and writes a results folder that stands on its own (run
 paths relative to it, training curves copied in) with a Markdown report. `evaluate_runs` is
@@ -20,13 +20,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from advgame.columns import (
-    RANDOM,
-    SCHEDULED,
-    adversary_columns,
-    default_threat,
-    describe_column,
-)
 from advgame.errors import ConfigError
 from advgame.evaluation import (
     NOMINAL,
@@ -36,7 +29,14 @@ from advgame.evaluation import (
     evaluate,
     population_jobs,
 )
-from advgame.protagonists import check_protagonists, cli_protagonists, run_protagonist
+from advgame.evaluation.columns import (
+    RANDOM,
+    SCHEDULED,
+    adversary_columns,
+    default_threat,
+    describe_column,
+)
+from advgame.evaluation.protagonists import check_protagonists, cli_protagonists, run_protagonist
 from advgame.training import TrainConfig
 
 __all__ = [
@@ -80,7 +80,7 @@ def evaluate_policies(
         scenario: the registered scenario every cell plays.
         protagonists: ``{name: spec}`` (`sb3_protagonist`, `team_protagonist`, a callable...).
         out: the results folder (``payoff.csv``, ``columns.json``, ``runs.json``, plots, report).
-        adversaries: column specs (`advgame.columns.adversary_columns`) or ready setups.
+        adversaries: column specs (`advgame.evaluation.columns.adversary_columns`) or ready setups.
         runs: ``{name: run directory}`` whose training curves (and, for ``learned``/``default``,
             adversaries) join the report; their progress CSVs are copied into `out`.
         last: keep the last K snapshots of population columns that do not say otherwise.
@@ -92,7 +92,7 @@ def evaluate_policies(
         budgets: σ levels of the state-noise sweep (empty: no sweep).
         progress: show progress bars.
         threat: the table's one threat model, a preset of `scenario` that attack, learned and
-            best-response columns all play in (default `advgame.columns.default_threat`).
+            best-response columns all play in (default `advgame.evaluation.columns.default_threat`).
 
     """
     out = Path(out)
@@ -140,7 +140,7 @@ def evaluate_policies(
 
 def _threat_record(scenario: str, preset: str) -> dict[str, Any]:
     """What the threat model is, for ``threat.json`` and the report."""
-    from advgame.registry import scenario_spec
+    from advgame.core.registry import scenario_spec
 
     presets = scenario_spec(scenario).load_presets()
     if preset not in presets:
@@ -165,7 +165,7 @@ def _threat_md(record: Mapping[str, Any]) -> str:
 
 def _write_runs(out: Path, runs: Mapping[str, Path]) -> None:
     """``runs.json``: each run's path relative to `out`, its progress CSV copied into `out`."""
-    from advgame.report import runs_cost_limit
+    from advgame.evaluation.report import runs_cost_limit
 
     entries: dict[str, dict[str, Any]] = {}
     for name, run_dir in runs.items():
@@ -282,7 +282,7 @@ def _exploitability(
     scenario: str, found: dict, out: Path, steps: int, episodes: int, threat: str
 ) -> None:
     """Best responses to every run's protagonist, all trained in the one threat model."""
-    from advgame.exploit import exploitability
+    from advgame.evaluation.exploit import exploitability
 
     results = {}
     for name, ((_, spec), _) in found.items():
@@ -297,7 +297,7 @@ def _exploitability(
 
 def report_folder(folder: Path, scenario: str | None = None) -> Path:
     """(Re)build ``report.md`` and its plots from the files an evaluation wrote in `folder`."""
-    from advgame.report import (
+    from advgame.evaluation.report import (
         adversary_listing,
         plot_budget_curve,
         plot_training_curves,

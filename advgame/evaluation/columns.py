@@ -44,8 +44,8 @@ from typing import Any
 import numpy as np
 
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
-from advgame.jobs import AdversarySetup
-from advgame.payoff import NOMINAL
+from advgame.evaluation.jobs import AdversarySetup
+from advgame.evaluation.payoff import NOMINAL
 
 __all__ = [
     "ATTACKS",
@@ -106,7 +106,7 @@ def _preset(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, 
 
 
 def _random(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
-    from advgame.registry import scenario_spec
+    from advgame.core.registry import scenario_spec
 
     spec = scenario_spec(ctx.scenario)
     presets = spec.load_presets()
@@ -117,7 +117,7 @@ def _random(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, 
 
 
 def _scheduled(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
-    from advgame.registry import scenario_spec
+    from advgame.core.registry import scenario_spec
 
     presets = scenario_spec(ctx.scenario).load_presets()
     for name in SCHEDULED:
@@ -155,7 +155,7 @@ ATTACKS = ("random", "mad", "critic")
 
 def default_threat(scenario: str) -> str:
     """The shared threat model of a table: ATLA's budgets where the scenario has them."""
-    from advgame.registry import scenario_spec
+    from advgame.core.registry import scenario_spec
 
     return "atla" if "atla" in scenario_spec(scenario).load_presets() else "default"
 
@@ -176,7 +176,7 @@ def _attack(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, 
 
 def _observation_agent(scenario: str, preset: str) -> str:
     """The adversary of `preset`'s bounded observation disruptor (what attacks play)."""
-    from advgame.registry import scenario_spec
+    from advgame.core.registry import scenario_spec
 
     presets = scenario_spec(scenario).load_presets()
     if preset not in presets:
@@ -265,7 +265,7 @@ def _adversary_shapes(scenario: str, preset: str) -> dict[str, tuple[int, ...]]:
 
 def _misfit(scenario: str, preset: str, specs: Mapping[str, Any]) -> str:
     """Why `specs` cannot act in `preset` of `scenario` ('' if they can)."""
-    from advgame.checkpoint import SB3Checkpoint, load_model
+    from advgame.training.checkpoint import SB3Checkpoint, load_model
 
     shapes = _adversary_shapes(scenario, preset)
     for agent, spec in specs.items():
@@ -288,7 +288,7 @@ def _snapshots(
     ctx: ColumnContext, source: Path, opts: Mapping[str, str]
 ) -> tuple[str, dict[int, dict[str, Any]]]:
     """The preset and ``{iteration: {agent: learned adversary member}}`` of a run or file."""
-    from advgame.population import Population
+    from advgame.training.population import Population
 
     file = source if source.suffix == ".json" else source / "population.json"
     if not file.is_file():

@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from advgame.checkpoint import ALGOS, SB3Checkpoint
 from advgame.errors import ConfigError, did_you_mean
+from advgame.training.checkpoint import ALGOS, SB3Checkpoint
 
 __all__ = [
     "check_protagonists",
@@ -40,7 +40,7 @@ def run_protagonist(run_dir: Path) -> tuple[Any, Any]:
 
     Team runs (MAPPO/IPPO) give ``{protagonist id: spec}``, one actor per protagonist.
     """
-    from advgame.config import load_json
+    from advgame.core.config import load_json
     from advgame.training import TEAM_ALGOS, TrainConfig
 
     state_path = run_dir / "state.json"
@@ -93,7 +93,7 @@ def sb3_protagonist(
             f"observations.{hint}"
         )
     if normalizer is not None:
-        from advgame.checkpoint import load_normalizer
+        from advgame.training.checkpoint import load_normalizer
 
         load_normalizer(str(normalizer))  # a missing or unreadable file fails here
     norm = None if normalizer is None else str(normalizer)
@@ -108,7 +108,7 @@ def team_protagonist(
     scenario: str, path: str | Path, preset: str | None = None, deterministic: bool = True
 ) -> dict[str, Any]:
     """A MAPPO/IPPO actors file (``<algo>_actors.pt``) as ``{protagonist id: spec}``."""
-    from advgame.registry import load, make
+    from advgame.core.registry import load, make
 
     if not Path(path).is_file():
         raise ConfigError(f"No team actors file at {str(path)!r}; expected <algo>_actors.pt.")
@@ -124,8 +124,8 @@ def check_protagonists(scenario: str, protagonists: Mapping[str, Any]) -> dict[s
     A checkpoint whose spaces (or normalizer) do not fit fails here, naming both sides, before
     any evaluation job is queued.
     """
-    from advgame.episodes import build_policies
-    from advgame.registry import make
+    from advgame.core.episodes import build_policies
+    from advgame.core.registry import make
 
     game = make(scenario, disruptors={})
     built = {}
@@ -177,7 +177,7 @@ def cli_protagonists(
     teams: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Protagonist specs from ``advgame evaluate`` options (``NAME=...`` strings)."""
-    from advgame.registry import load
+    from advgame.core.registry import load
 
     models = _named(checkpoints, "--checkpoint", "NAME=PATH[:ALGO]")
     norms = _named(normalizers, "--normalizer", "NAME=PATH")

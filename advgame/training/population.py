@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.registry import load
 from advgame.errors import ConfigError
-from advgame.registry import load
 
 __all__ = ["PATH_FIELDS", "SAMPLING", "Member", "Population", "spec_from_dict", "spec_to_dict"]
 

@@ -15,9 +15,9 @@ from typing import Any
 
 import gymnasium as gym
 
-from advgame.episodes import build_policies, reseed_policies
+from advgame.core.episodes import build_policies, reseed_policies
+from advgame.core.game import Game
 from advgame.errors import ConfigError
-from advgame.game import Game
 
 __all__ = ["SingleAgentView", "view_factory"]
 
@@ -216,7 +216,7 @@ class _Placeholder:
 def _build_view(
     scenario_id: str, agent: str, policies: Mapping[str, Any], make_kwargs: Mapping[str, Any]
 ) -> SingleAgentView:
-    from advgame.registry import make
+    from advgame.core.registry import make
 
     return SingleAgentView(make(scenario_id, **make_kwargs), agent, policies)
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.checkpoint import SB3Checkpoint
+from advgame.training.checkpoint import SB3Checkpoint
 
 __all__ = ["EpisodeStats", "Side", "normalized"]
 
@@ -92,7 +92,7 @@ class Side:
     Args:
         agent: the agent id it learns for.
         learner: a learner config (`advgame.agents.PPOConfig`, ...).
-        env_fns: thunks building its views (`advgame.views.view_factory`).
+        env_fns: thunks building its views (`advgame.core.views.view_factory`).
         seed: seeds the model and the VecEnv.
         total_steps: planned steps over the run (for learning-rate decay).
         normalize: wrap the views in `VecNormalize` (observations and rewards).
@@ -199,7 +199,7 @@ class Side:
         """Rebuild a side saved by `save` (to resume a run)."""
         from stable_baselines3.common.vec_env import VecNormalize
 
-        from advgame.checkpoint import _algo_class
+        from advgame.training.checkpoint import _algo_class
 
         venv = _make_venv(env_fns, vec_env)
         stats = folder / f"{agent}_vecnormalize.pkl"

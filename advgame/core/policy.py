@@ -57,7 +57,7 @@ class WhiteBox(Protocol):
 
     Every method takes a batch of *raw* observations as a float32 torch tensor ``[batch, obs]``
     and applies the policy's own frozen normalizer, so an attack works in the units the game
-    uses. Implemented by `advgame.checkpoint.SB3Policy` and the MAPPO/IPPO actor policies.
+    uses. Implemented by `advgame.training.checkpoint.SB3Policy` and the MAPPO/IPPO actor policies.
     """
 
     def action_mean(self, obs: Any) -> Any:
