@@ -79,8 +79,8 @@ def test_readme_installation_names_every_extra_and_the_python_versions() -> None
 def test_a_missing_extra_is_a_clear_error_and_is_marked_in_the_listing(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from advgame.core import registry
     from advgame.cli import main
+    from advgame.core import registry
 
     spec = ScenarioSpec(
         id="Needs-v0",
