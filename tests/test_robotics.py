@@ -358,3 +358,17 @@ def test_training_loop_runs_sac_her_under_attack(tmp_path: Any, one_torch_thread
             str(tmp_path / "norm"),
             progress=False,
         )
+
+
+def test_goal_view_passes_sb3_env_checker_as_a_goal_env() -> None:
+    import warnings
+
+    from stable_baselines3.common.env_checker import check_env
+
+    view = _her_view()
+    assert view.observation_space is view.game.observation_space("protagonist")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # unbounded observation spaces: a warning, not an error
+        check_env(view, warn=True)  # includes SB3's goal-env checks of compute_reward
+    obs, info = view.reset(seed=0)
+    assert view.observation_space.contains(obs) and "is_success" in info
