@@ -200,6 +200,7 @@ def _model_params(game: advgame.Game) -> dict[str, np.ndarray]:
     "sid",
     [
         "PointMaze_UMaze-v3",
+        "AntMaze_UMaze-v5",
         "FetchPush-v4",
         "HandReach-v3",
         "AdroitHandHammer-v1",

@@ -87,7 +87,17 @@ def flatten(obs: Mapping[str, Any], names: Sequence[str]) -> np.ndarray:
 
 
 def layout(space: spaces.Dict, keys: Sequence[str] | None) -> list[Leaf]:
-    """The leaves `keys` select (every leaf if None), each with its block of the perturbation."""
+    """The leaves `keys` select (every leaf if None), each with its block of the perturbation.
+
+    Example:
+        >>> box = spaces.Box(-1.0, 1.0, (2,))
+        >>> space = spaces.Dict({"observation": spaces.Box(-1.0, 1.0, (4,)), "desired_goal": box})
+        >>> [(leaf.name, leaf.block) for leaf in layout(space, ["observation", "desired_goal"])]
+        [('observation', slice(0, 4, None)), ('desired_goal', slice(4, 6, None))]
+        >>> [leaf.name for leaf in layout(space, None)]  # default: the space's (sorted) order
+        ['desired_goal', 'observation']
+
+    """
     table = leaves(space)
     names = [n for n, _ in table]
     out: list[Leaf] = []
