@@ -59,6 +59,13 @@ class _SB3Config:
                 f"{type(self).__name__}.net_arch must be positive ints, got {self.net_arch!r}."
             )
 
+    @staticmethod
+    def policy(env: Any) -> str:
+        """SB3's policy class name for `env`: ``MultiInputPolicy`` for Dict observations."""
+        from gymnasium import spaces
+
+        return "MultiInputPolicy" if isinstance(env.observation_space, spaces.Dict) else "MlpPolicy"
+
     def _common(self, seed: int, total_steps: int, tensorboard_log: str | None) -> dict[str, Any]:
         """Keyword arguments every SB3 algorithm takes, from this config."""
         lr: Any = (
@@ -107,7 +114,7 @@ class PPOConfig(_SB3Config):
         from stable_baselines3 import PPO
 
         return PPO(
-            "MlpPolicy",
+            self.policy(env),
             env,
             n_steps=self.n_steps,
             batch_size=self.batch_size,
@@ -160,21 +167,63 @@ class SACConfig(_OffPolicyConfig):
     """Environment steps between updates."""
     gradient_steps: int = 1
     """Updates per training call (paper: update per step 1)."""
+    her: bool = False
+    """Hindsight experience replay for goal-conditioned views (Dict observations with
+    ``achieved_goal``/``desired_goal``): `advgame.agents.her.TrueGoalHerReplayBuffer`, which
+    relabels with the task's true goals even under an observation attack."""
+    her_n_sampled_goal: int = 4
+    """HER: virtual transitions per real one."""
+    her_goal_selection: str = "future"
+    """HER: where new goals come from, ``"future"``, ``"final"`` or ``"episode"``."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.her_goal_selection not in ("future", "final", "episode"):
+            raise ConfigError(
+                "SACConfig.her_goal_selection must be 'future', 'final' or 'episode', got "
+                f"{self.her_goal_selection!r}."
+            )
+        if self.her_n_sampled_goal < 1:
+            raise ConfigError(
+                f"SACConfig.her_n_sampled_goal must be >= 1, got {self.her_n_sampled_goal!r}."
+            )
 
     def make_model(
         self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
     ) -> Any:
-        """Build an SB3 SAC on `env`."""
+        """Build an SB3 SAC on `env` (``MultiInputPolicy`` on Dict observations)."""
         from stable_baselines3 import SAC
 
         return SAC(
-            "MlpPolicy",
+            self.policy(env),
             env,
             train_freq=self.train_freq,
             gradient_steps=self.gradient_steps,
             ent_coef=self.ent_coef,
+            **self._her(env),
             **self._off_policy(seed, total_steps, tensorboard_log),
         )
+
+    def _her(self, env: Any) -> dict[str, Any]:
+        """The replay-buffer arguments HER needs (none without it)."""
+        if not self.her:
+            return {}
+        keys = getattr(env.observation_space, "spaces", {})
+        if not {"achieved_goal", "desired_goal"} <= set(keys):
+            raise ConfigError(
+                f"SACConfig(her=True) needs a goal-conditioned Dict observation with "
+                f"'achieved_goal' and 'desired_goal', got {env.observation_space}; use a Fetch, "
+                "Hand or Maze scenario, or her=False."
+            )
+        from advgame.agents.her import TrueGoalHerReplayBuffer
+
+        return {
+            "replay_buffer_class": TrueGoalHerReplayBuffer,
+            "replay_buffer_kwargs": {
+                "n_sampled_goal": self.her_n_sampled_goal,
+                "goal_selection_strategy": self.her_goal_selection,
+            },
+        }
 
 
 @dataclass(frozen=True)
@@ -203,7 +252,7 @@ class TD3Config(_OffPolicyConfig):
         half = (env.action_space.high - env.action_space.low) / 2.0
         noise = NormalActionNoise(np.zeros(n), self.action_noise * half * np.ones(n))
         return TD3(
-            "MlpPolicy",
+            self.policy(env),
             env,
             policy_delay=self.policy_delay,
             action_noise=noise,

@@ -12,6 +12,7 @@ if __name__ != "advgame.scenarios":  # pragma: no cover - packaging guard
 
 from advgame.core.registry import ScenarioSpec, register
 from advgame.scenarios.mamujoco_list import register_all as _register_mamujoco
+from advgame.scenarios.robotics_list import ENVS as _ROBOTICS
 
 _MUJOCO = "advgame.scenarios.mujoco"
 _BOX2D = "advgame.scenarios.box2d"
@@ -21,6 +22,10 @@ EXTRAS: dict[str, tuple[str, tuple[str, ...]]] = {
     "mujoco": ("", ()),
     "safe": ("", ()),
     "box2d": ("box2d", ("Box2D", "pygame")),
+    # gymnasium-robotics 1.4.2 (robotics.py): goal-conditioned and dexterous manipulation
+    **dict.fromkeys(
+        ("maze", "fetch", "hand", "adroit", "kitchen"), ("robotics", ("gymnasium_robotics",))
+    ),
 }
 """Family -> (the advgame extra that installs it, the modules its task base imports)."""
 
@@ -69,6 +74,16 @@ _gym("BipedalWalker-v3", "box2d", _BOX2D, "2D biped over rough terrain")
 _gym("CarRacing-v3", "box2d", _BOX2D, "top-down racing from 96x96 pixels")
 _gym("LunarLander-v3", "box2d", _BOX2D, "lander with four discrete engine actions")
 _gym("LunarLanderContinuous-v3", "box2d", _BOX2D, "lander with continuous throttles")
+
+
+# gymnasium-robotics: Maze, Fetch, Shadow Hand, Adroit, Franka Kitchen (ids in robotics.py:
+# ENVS in robotics_list.py, read without importing a simulator).
+def _register_robotics() -> None:
+    for env_id, (family, description) in _ROBOTICS.items():
+        _gym(env_id, family, "advgame.scenarios.robotics", description)
+
+
+_register_robotics()
 # MaMuJoCo (gymnasium-robotics): one registry line per factorization, in mamujoco_list.py.
 _register_mamujoco()
 

@@ -25,11 +25,27 @@ from advgame.core.registry import scenario_spec
 SLOW = {"CarRacing-v3"}
 """Scenarios whose reset is expensive (CarRacing builds a track): fewer cycles."""
 
-SHORT_FAMILIES = {"robosuite"}
-"""Families whose steps are slow (robosuite: ~4-100 ms a step): short horizons in these tests."""
+SHORT_FAMILIES = {"robosuite", "maze", "fetch", "hand", "adroit", "kitchen"}
+"""Families whose steps are slow (robosuite: ~4-100 ms a step; gymnasium-robotics: 0.3-3 ms,
+many ids): short horizons in these tests."""
+
+ROBOTICS_SAMPLE = {
+    "PointMaze_UMaze-v3",
+    "FetchPush-v4",
+    "HandManipulateEgg_BooleanTouchSensors-v1",
+    "AdroitHandDoor-v1",
+    "FrankaKitchen-v1",
+}
+"""gymnasium-robotics: one id per family in the default suite; every other id under -m slow."""
+
+
+def _marks(sid: str) -> list[pytest.MarkDecorator]:
+    robotics = scenario_spec(sid).extra == "robotics"
+    return [pytest.mark.slow] if robotics and sid not in ROBOTICS_SAMPLE else []
+
 
 CASES = [
-    pytest.param(sid, name, id=f"{sid}:{name}")
+    pytest.param(sid, name, id=f"{sid}:{name}", marks=_marks(sid))
     for sid in advgame.list_scenarios()
     for name in scenario_spec(sid).load_presets()
 ]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import abc
 import logging
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -165,6 +165,10 @@ class TaskBase(abc.ABC):
     """Truncation horizon, if the task has one."""
     has_cost: bool = False
     """Whether the task computes a safety cost (a cost weight needs one)."""
+    goal_reward: Callable[[Any, Any, Any], Any] | None = None
+    """Goal-conditioned tasks with Box goals: their reward ``(achieved_goal, desired_goal,
+    info)``, vectorised, for hindsight relabelling; None for every other task. A protagonist's
+    single-agent view exposes it as ``compute_reward``."""
 
     @abc.abstractmethod
     def reset(self, seed: int | None) -> tuple[dict[str, Any], dict[str, Any]]:

@@ -67,6 +67,13 @@ class SingleAgentView(gym.Env):
         self._protagonist = agent in game.protagonists
         self._schedule = disruptor.schedule if disruptor is not None else None
         self._players: dict[frozenset[str], list[tuple[str, Any]]] = {}
+        goal_reward = game.task.goal_reward if self._protagonist else None
+        if goal_reward is not None:  # only then: SB3 takes any env with it for a goal env
+            self.compute_reward = goal_reward
+            """The task's own goal reward ``(achieved_goal, desired_goal, info)`` (goal-conditioned
+            tasks), what HER relabels with: true goals in, the task's true reward out. Which goals
+            HER passes is the replay buffer's choice; `advgame.agents.her`'s passes the true
+            achieved goals the task put in ``info``, not the perturbed ones the protagonist saw."""
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         """Reset the game and the embedded policies; play until the learner's first decision."""

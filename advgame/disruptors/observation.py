@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 from gymnasium import spaces
 
+from advgame.disruptors import dict_obs
 from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget, resolve_targets
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
@@ -30,6 +31,13 @@ class ObservationDisruptor(DisruptorSpec):
     running standard deviation set by `ObservationRuntime.set_scale`. The perturbed observation
     is clipped into the protagonist's observation space when that space is bounded.
 
+    Dict observations (goal-conditioned robotics: ``observation``, ``achieved_goal``,
+    ``desired_goal``; nested keys joined with ``/``) keep their structure: `keys` chooses the
+    parts attacked, `eps` may give a budget per key (``{"desired_goal": 0.05, ...}``), and the
+    adversary's action is the concatenation of the keys' blocks in the order of `keys` (default:
+    every leaf in the Dict space's order); see `advgame.disruptors.dict_obs`. Only what the
+    protagonist sees changes: the task keeps rewarding against its true goals.
+
     Example:
         >>> import advgame
         >>> game = advgame.make("Hopper-v5", disruptors=[ObservationDisruptor(eps=0.075)])
@@ -39,16 +47,18 @@ class ObservationDisruptor(DisruptorSpec):
     """
 
     kind = "observation"
-    eps: float | Sequence[float] = 0.1
-    """Budget per attacked dimension (raw or normalized units)."""
+    eps: float | Sequence[float] | Mapping[str, float | Sequence[float]] = 0.1
+    """Budget per attacked dimension (raw or normalized units); for Dict observations also a
+    mapping from each attacked key to its budget (a scalar or one value per component)."""
     norm: Literal["linf", "l2"] = "linf"
     """Shape of the ball: per-dimension (``"linf"``) or Euclidean per target (``"l2"``)."""
     dims: Sequence[int] | None = None
     """Indices of the observation dimensions attacked (``None``: all)."""
     keys: Sequence[str] | None = None
-    """Names of observation parts attacked, for tasks that flatten a dict observation and say
-    where each key lies (``task.observation_keys``, e.g. robosuite's ``"object-state"``);
-    exclusive with `dims`."""
+    """Names of observation parts attacked: keys of a Dict observation (``"desired_goal"``,
+    ``"achieved_goal/kettle"``; default with a per-key `eps` mapping: its keys), or, for tasks
+    that flatten a dict observation and say where each key lies (``task.observation_keys``,
+    e.g. robosuite's ``"object-state"``), those names; exclusive with `dims`."""
     targets: Sequence[str] | None = None
     """Protagonists whose observations are perturbed (``None``: all; a subset is a partial attack)."""
     space: Literal["raw", "normalized"] = "raw"
@@ -73,16 +83,50 @@ class ObservationDisruptor(DisruptorSpec):
                 f"keys must be a list of names and exclusive with dims, got keys={self.keys!r}, "
                 f"dims={self.dims!r}."
             )
-        if self.bounded:
+        if isinstance(self.eps, Mapping):
+            self._check_key_budgets(self.eps)
+        elif self.bounded:
             eps = np.asarray(self.eps, dtype=np.float64)
             as_budget(self.eps, eps.size if eps.ndim else 1, "ObservationDisruptor.eps")
 
+    def _check_key_budgets(self, eps: Mapping[str, Any]) -> None:
+        """A per-key budget: bounded, and naming exactly the attacked keys when both are given."""
+        if not self.bounded or self.dims is not None or self.space != "raw":
+            raise ConfigError(
+                "A per-key eps mapping needs bounded=True, raw units and no dims, got "
+                f"bounded={self.bounded!r}, space={self.space!r}, dims={self.dims!r}."
+            )
+        if self.keys is not None and set(eps) != set(self.keys):
+            raise BudgetError(
+                f"eps gives budgets for {sorted(eps)} but keys={list(self.keys)!r}; give one "
+                "budget per attacked key (or leave keys out: the mapping's keys are attacked)."
+            )
+        for key, value in eps.items():
+            arr = np.asarray(value, dtype=np.float64)
+            as_budget(value, arr.size if arr.ndim else 1, f"ObservationDisruptor.eps[{key!r}]")
+
+    @property
+    def dict_keys(self) -> Sequence[str] | None:
+        """The keys of a Dict observation attacked (None: every leaf)."""
+        if self.keys is None and isinstance(self.eps, Mapping):
+            return list(self.eps)
+        return self.keys
+
     def build(self, task: TaskBase) -> ObservationRuntime:
-        """Bind to `task`: check dims against each target's observation space."""
+        """Bind to `task`: check dims (or Dict keys) against each target's observation space."""
         targets = resolve_targets(task, self.targets)
         dims: dict[str, np.ndarray] = {}
+        plans: dict[str, list[dict_obs.Leaf]] = {}
         for t in targets:
             space = task.observation_spaces[t]
+            if isinstance(space, spaces.Dict):
+                plans[t] = self._dict_plan(t, space)
+                dims[t] = np.arange(plans[t][-1].block.stop)
+                continue
+            if isinstance(self.eps, Mapping):
+                raise ConfigError(
+                    f"A per-key eps mapping needs a Dict observation; {t!r} observes {space}."
+                )
             if not isinstance(space, spaces.Box):
                 raise ConfigError(
                     f"Observation of {t!r} is {space}; only Box observations can be perturbed."
@@ -97,7 +141,19 @@ class ObservationDisruptor(DisruptorSpec):
                     f"dims must be indices in [0, {n}) of {t!r}'s flattened observation, got {self.dims!r}."
                 )
             dims[t] = idx
-        return ObservationRuntime(self, task, targets, dims)
+        return ObservationRuntime(self, task, targets, dims, plans)
+
+    def _dict_plan(self, target: str, space: spaces.Dict) -> list[dict_obs.Leaf]:
+        """The leaves of `target`'s Dict observation this disruptor perturbs."""
+        if self.dims is not None or self.space != "raw":
+            raise ConfigError(
+                f"{target!r} observes a Dict; choose its parts with keys=[...] (not dims) and "
+                f"raw units, got dims={self.dims!r}, space={self.space!r}."
+            )
+        plan = dict_obs.layout(space, self.dict_keys)
+        if not plan:
+            raise ConfigError(f"keys={self.keys!r} selects nothing of {target!r}'s observation.")
+        return plan
 
 
 def _key_dims(task: TaskBase, keys: Sequence[str]) -> np.ndarray:
@@ -128,29 +184,36 @@ class ObservationRuntime(AdditiveDisruptor):
         task: TaskBase,
         targets: tuple[str, ...],
         dims: dict[str, np.ndarray],
+        plans: dict[str, list[dict_obs.Leaf]] | None = None,
     ) -> None:
         self.targets = targets
         self.dims = dims
-        # build() checked that every target observes a Box
+        self.plans = plans or {}
+        """Per target with a Dict observation: the leaves perturbed, in action order."""
+        # build() checked that every other target observes a Box
         self.spaces: dict[str, spaces.Box] = {
-            t: cast(spaces.Box, task.observation_spaces[t]) for t in targets
+            t: cast(spaces.Box, task.observation_spaces[t]) for t in targets if t not in self.plans
         }
-        self.full = {t: dims[t].size == int(np.prod(self.spaces[t].shape)) for t in targets}
-        self.eps = {
-            t: as_budget(spec.eps, dims[t].size, "ObservationDisruptor.eps")
-            if spec.bounded
-            else np.ones(dims[t].size)
-            for t in targets
-        }
+        self.full = {t: dims[t].size == int(np.prod(s.shape)) for t, s in self.spaces.items()}
+        self.eps = {t: self._budget(spec, t) for t in targets}
         self.scale = {t: np.ones(dims[t].size) for t in targets}
         self.clip_obs = {
             t: bool(np.isfinite(s.low).any() or np.isfinite(s.high).any())
             for t, s in self.spaces.items()
         }
         self.timing = spec.timing
-        sizes = [dims[t].size for t in targets]
+        sizes: list[int] = []
+        for t in targets:  # the L2 ball is per target, and per key of a Dict observation
+            sizes += dict_obs.key_blocks(self.plans[t]) if t in self.plans else [dims[t].size]
         super().__init__(spec, self._unit(), bounded=spec.bounded, norm=spec.norm, blocks=sizes)
         self._plan = self._blocks()
+
+    def _budget(self, spec: ObservationDisruptor, target: str) -> np.ndarray:
+        if not spec.bounded:
+            return np.ones(self.dims[target].size)
+        if target in self.plans:
+            return dict_obs.budget(self.plans[target], spec.eps)
+        return as_budget(spec.eps, self.dims[target].size, "ObservationDisruptor.eps")  # type: ignore[arg-type]
 
     def _unit(self) -> np.ndarray:
         return np.concatenate([self.eps[t] * self.scale[t] for t in self.targets])
@@ -161,8 +224,11 @@ class ObservationRuntime(AdditiveDisruptor):
         Call it again whenever the protagonist's normalizer changes; a frozen normalizer keeps the
         budget fixed during an adversary phase.
         """
-        if self.spec.space != "normalized":  # type: ignore[attr-defined]
-            raise ConfigError("set_scale applies only to ObservationDisruptor(space='normalized').")
+        if self.spec.space != "normalized" or target in self.plans:  # type: ignore[attr-defined]
+            raise ConfigError(
+                "set_scale applies only to ObservationDisruptor(space='normalized') on a Box "
+                "observation."
+            )
         std = np.asarray(std, dtype=np.float64).reshape(-1)
         n = int(np.prod(self.spaces[target].shape))
         if std.shape != (n,) or not np.all(np.isfinite(std)) or np.any(std <= 0):
@@ -173,17 +239,25 @@ class ObservationRuntime(AdditiveDisruptor):
         self.scale[target] = std[self.dims[target]]
         self.unit = self._unit()
 
-    def _blocks(self) -> list[tuple[str, slice | None, bool, spaces.Box, Bounds]]:
+    def _blocks(self) -> list[tuple[str, slice | None, bool, spaces.Box | None, Bounds]]:
         """Per target: its block of δ (``None``: all), whether it is whole, its space, its bounds.
+
+        A target with a Dict observation has space None (its plan says where δ goes).
 
         Bounds (``None`` when unbounded) are kept in float64, the dtype of the perturbed
         observation: clipping against float32 bounds would convert them (exactly) every call.
         """
-        out, i = [], 0
+        out: list[tuple[str, slice | None, bool, spaces.Box | None, Bounds]] = []
+        i = 0
         whole = len(self.targets) == 1
         for t in self.targets:
-            n, space = self.dims[t].size, self.spaces[t]
+            n, box = self.dims[t].size, self.spaces.get(t)
             block = None if whole else slice(i, i + n)
+            if box is None:
+                out.append((t, block, True, None, None))
+                i += n
+                continue
+            space = box
             bounds = (space.low.astype(np.float64), space.high.astype(np.float64))
             out.append((t, block, self.full[t], space, bounds if self.clip_obs[t] else None))
             i += n
@@ -195,6 +269,9 @@ class ObservationRuntime(AdditiveDisruptor):
         for t, block, full, space, bounds in self._plan:
             d = delta if block is None else delta[block]
             obs = observations[t]
+            if space is None:  # a Dict observation: a new dict, the true one untouched
+                observations[t] = dict_obs.perturb(obs, self.plans[t], d)
+                continue
             if full and obs.ndim == 1:
                 new = obs + d
             else:

@@ -35,10 +35,18 @@ def _algo_class(algo: str) -> Any:
 
 @functools.lru_cache(maxsize=64)
 def load_model(path: str, algo: str) -> Any:
-    """Load an SB3 model on the CPU (cached per process: evaluation reuses it across cells)."""
+    """Load an SB3 model on the CPU (cached per process: evaluation reuses it across cells).
+
+    A policy is loaded to act, not to train on: a HER replay buffer (which SB3 can build only
+    with an env) is replaced by the plain one, so HER checkpoints load without their env.
+    """
     if not Path(path).exists():
         raise ConfigError(f"No checkpoint at {path!r}.")
-    return _algo_class(algo).load(path, device="cpu")
+    plain: dict[str, Any] = {
+        "replay_buffer_class": None,
+        "replay_buffer_kwargs": {},
+    }  # only where saved (SAC/TD3)
+    return _algo_class(algo).load(path, device="cpu", custom_objects=plain)
 
 
 @dataclass(frozen=True)
@@ -152,8 +160,16 @@ class SB3Policy:
         """The policy's action for one raw observation.
 
         Normalized in the observation's own precision, then cast to float32, exactly as
-        `VecNormalize.normalize_obs` and SB3's ``predict`` do.
+        `VecNormalize.normalize_obs` and SB3's ``predict`` do. A Dict observation (goal-
+        conditioned tasks, ``MultiInputPolicy``) goes through SB3's ``predict`` unnormalized.
         """
+        if isinstance(observation, dict):
+            if self.mean is not None:
+                raise ConfigError(
+                    "A Dict observation cannot go through a Box normalizer; train goal-"
+                    "conditioned protagonists with normalize=False."
+                )
+            return self.model.predict(observation, deterministic=self.deterministic)[0]
         obs = np.asarray(observation)
         if self.mean is not None and self.std is not None:
             obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs)

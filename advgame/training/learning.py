@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from advgame.errors import ConfigError
 from advgame.training.checkpoint import SB3Checkpoint
 
 __all__ = ["EpisodeStats", "Side", "normalized"]
@@ -81,8 +82,14 @@ def normalized(venv: Any, normalize: bool, gamma: float) -> Any:
     """`venv` under SB3's `VecNormalize` (observations and rewards, discount `gamma`) if asked."""
     if not normalize:
         return venv
+    from gymnasium import spaces
     from stable_baselines3.common.vec_env import VecNormalize
 
+    if isinstance(venv.observation_space, spaces.Dict):
+        raise ConfigError(
+            f"normalize=True needs a Box observation, got {venv.observation_space}; goal-"
+            "conditioned (Dict) protagonists train with TrainConfig(normalize=False)."
+        )
     return VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=gamma)
 
 
