@@ -24,7 +24,7 @@ ROOT = Path(advgame.__file__).resolve().parents[1]
 LOCK = ROOT / "constraints.txt"
 CORE = {"gymnasium", "pettingzoo", "mujoco", "torch", "stable-baselines3", "numpy"}
 CORE |= {"matplotlib", "tqdm", "tensorboard"}
-EXTRAS = {"box2d", "mamujoco", "robotics", "robosuite", "llm", "test", "all"}
+EXTRAS = {"box2d", "mamujoco", "robotics", "robosuite", "llm", "ray", "test", "all"}
 
 
 def _lock() -> dict[str, Version]:
@@ -79,8 +79,8 @@ def test_readme_installation_names_every_extra_and_the_python_versions() -> None
 def test_a_missing_extra_is_a_clear_error_and_is_marked_in_the_listing(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from advgame.core import registry
     from advgame.cli import main
+    from advgame.core import registry
 
     spec = ScenarioSpec(
         id="Needs-v0",
