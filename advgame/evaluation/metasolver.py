@@ -49,10 +49,10 @@ def fictitious_play(payoffs: np.ndarray, iterations: int = 2000) -> Strategies:
     lowest index), starting from row 0 and column 0. The mixtures converge to a Nash
     equilibrium of a zero-sum game (Robinson, 1951), slowly: ``O(iterations^(-1/2))``-ish.
 
-    Example:
-        >>> row, col = fictitious_play(np.array([[3.0, 1.0], [0.0, 2.0]]), iterations=10)
+    Example (the equilibrium is row (1/2, 1/2), column (1/4, 3/4)):
+        >>> row, col = fictitious_play(np.array([[3.0, 1.0], [0.0, 2.0]]), iterations=1000)
         >>> row.round(2).tolist(), col.round(2).tolist()
-        ([0.6, 0.4], [0.3, 0.7])
+        ([0.5, 0.5], [0.24, 0.76])
 
     """
     m = _matrix(payoffs)
