@@ -224,8 +224,8 @@ def evaluate(
 
     Args:
         jobs: the cells to play.
-        workers: local: 1 plays in this process, more in a process pool; Ray: the CPUs of the
-            local Ray it starts (if none is running).
+        workers: local: 1 plays in this process, more in a process pool; Ray: units in flight
+            at once (and the CPUs of the local Ray it starts if none is running).
         progress: show a tqdm progress bar on stderr.
         start_method: local pool: ``"forkserver"`` or ``"spawn"`` (not fork: simulators and
             torch hold threads and GL contexts that do not survive it).

@@ -1,6 +1,7 @@
 """The Ray back end of `advgame.evaluation.executor.run_units`: Ray core tasks.
 
-Each unit is one task needing one CPU. Ray keeps its worker processes alive and reuses them
+Each unit is one task needing one CPU; at most ``workers`` units are in flight at once (on
+a cluster, pass the number of CPUs to use). Ray keeps its worker processes alive and reuses them
 for later tasks of the same job, so checkpoints a worker loaded stay cached (warm workers).
 Tasks are submitted with ``max_retries=0`` and retried here, so that a unit's attempts are
 counted and bounded the same way as on the local pool: a crashed worker (killed, out of
@@ -82,10 +83,11 @@ def run_ray(
         recs[i].extra["submitted"] = time.time()
         inflight[task.remote(fn_ref, blobs[i], args[i])] = i
 
-    for i in range(len(units)):
-        submit(i)
+    queue = list(range(len(units)))[::-1]
     try:
-        while inflight:
+        while queue or inflight:
+            while queue and len(inflight) < opts.workers:  # at most `workers` units in flight
+                submit(queue.pop())
             (ref,), _ = ray.wait(list(inflight), num_returns=1)
             i = inflight.pop(ref)
             try:
@@ -96,11 +98,11 @@ def run_ray(
                     raise cause from None
                 error = f"{type(cause).__name__}: {cause}" if cause else str(exc)
                 if retry(recs[i], error, opts):
-                    submit(i)
+                    queue.append(i)
                 continue
             except ray.exceptions.RayError as exc:  # the worker (or its node) died
                 if retry(recs[i], f"{type(exc).__name__}: {str(exc).splitlines()[0]}", opts):
-                    submit(i)
+                    queue.append(i)
                 continue
             recs[i].error = None
             finish(recs[i], out, opts)

@@ -269,8 +269,8 @@ def run_units(
         fn: a module-level function (it is pickled by reference).
         units: picklable values.
         executor: ``"local"`` or ``"ray"``.
-        workers: local: worker processes (1 runs here); Ray: CPUs of a local Ray it starts
-            (ignored when attaching to a running Ray or `address`).
+        workers: local: worker processes (1 runs here); Ray: units in flight at once, and the
+            CPUs of the local Ray it starts when none is running and `address` is None.
         address: Ray only: the cluster (``"auto"``, ``"ray://head:10001"``); None attaches to
             a Ray already initialized in this process or starts a local one.
         max_retries: extra attempts of a unit whose worker died or that raised a non-advgame
