@@ -8,10 +8,11 @@ cell: 2 × 3 × 4 = 24 units (one per cell and seed), i.e. >= 3 units per worker
 Each round runs the four variants interleaved (local W=1, Ray W=1, local W=2, Ray W=2) on one
 local Ray started once with 2 CPUs (its worker processes stay warm across rounds, as on a real
 cluster); the local pool is created inside the timed region, as `evaluate` does. Every
-variant must give the same rows. Printed per variant (best round): wall time, the speed-up
-of W=2 over W=1, the Ray/local ratio, per-unit start-up (from a unit's start to its
-protagonist's first action; cold = a worker's first unit, warm = its later ones), and the
-share of worker time idle (``1 - Σ unit time / (W × wall)``).
+variant must give the same rows. Printed per variant (medians over rounds; ratios are the
+medians of per-round ratios, as the machine's speed drifts between rounds): wall time, the
+speed-up of W=2 over W=1, the Ray/local ratio, per-unit start-up (from a unit's start to its
+protagonist's first action; cold = a worker's first unit in round 1, warm = its later
+units), and the share of worker time idle (``1 - Σ unit time / (W × wall)``).
 
 Ray's per-job overhead: ``--trivial`` no-op units on 2 workers, ``wall × W / N`` per unit,
 for both executors (the local pool's includes starting its processes, Ray's does not).
@@ -117,17 +118,19 @@ def main() -> None:
                 results[kind, w].append((wall, idle_share(recs, w, wall), *startup_ms(recs)))
                 print(f"round {r + 1}: {kind:5s} W={w} {wall:6.2f} s, idle {results[kind, w][-1][1]:.0%}, "
                       f"load average {os.getloadavg()[0]:.2f}")  # fmt: skip
-    best = {v: min(rs) for v, rs in results.items()}
+    med = {v: np.median(np.array(rs), axis=0) for v, rs in results.items()}
     units = len(jobs) * args.seeds
     print(f"\n{ENV}: {len(jobs)} cells × {args.seeds} seeds = {units} units of one {args.steps}-step "
-          f"episode; {os.cpu_count()} CPUs; best of {args.rounds} rounds; rows identical")  # fmt: skip
-    print("  executor  W   wall s  W2/W1  ray/local  start-up ms cold/warm  idle")
+          f"episode; {os.cpu_count()} CPUs; {args.rounds} interleaved rounds; rows identical")  # fmt: skip
+    print("  medians over rounds (ratios: median of the per-round ratios)")
+    print("  executor  W   wall s  W2/W1  ray/local  start-up ms (1st round cold / warm)  idle")
     for kind, w in VARIANTS:
-        wall, idle, cold, warm = best[kind, w]
-        speed = best[kind, 1][0] / wall if w == 2 else 1.0
-        ratio = wall / best["local", w][0]
-        print(f"  {kind:8s} {w:2d} {wall:8.2f} {speed:6.2f}x {ratio:8.2f}   "
-              f"{cold:9.1f} / {warm:6.1f}     {idle:5.0%}")  # fmt: skip
+        walls = np.array([r[0] for r in results[kind, w]])
+        speed = np.median(np.array([r[0] for r in results[kind, 1]]) / walls)
+        ratio = np.median(walls / np.array([r[0] for r in results["local", w]]))
+        cold = results[kind, w][0][2]
+        print(f"  {kind:8s} {w:2d} {med[kind, w][0]:8.2f} {speed:6.2f}x {ratio:8.2f}   "
+              f"{cold:9.1f} / {med[kind, w][3]:6.1f}                  {med[kind, w][1]:5.0%}")  # fmt: skip
     for kind in ("local", "ray"):
         print(f"  per-job overhead, {kind:5s}: {overhead_ms(kind, args.trivial):6.1f} ms "
               f"({args.trivial} no-op units on 2 workers)")  # fmt: skip
