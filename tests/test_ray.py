@@ -77,6 +77,14 @@ def still_hopper(obs: np.ndarray) -> np.ndarray:
     return np.zeros(3, dtype=np.float32)
 
 
+def fingerprint(spec: SB3Checkpoint) -> tuple[int, float]:
+    """This worker's pid and the sum of the weights of the model it has for `spec`."""
+    from advgame.training.checkpoint import load_model
+
+    params = load_model(spec.path, spec.algo).policy.parameters()
+    return os.getpid(), float(sum(p.detach().sum() for p in params))
+
+
 def file_size(spec: SB3Checkpoint) -> tuple[str, int]:
     """Where the worker found the spec's file, and its size."""
     return spec.path, Path(spec.path).stat().st_size
@@ -172,6 +180,22 @@ def test_a_killed_pool_worker_is_retried(importable: None, tmp_path: Path) -> No
     recs = run_units(die_once, units, workers=2, max_retries=2)
     assert all(r.error is None and r.value > 0 for r in recs)
     assert all(len(Path(u, "attempted").read_text().split()) == 2 for u in units)
+
+
+def test_warm_pool_workers_reload_a_rewritten_checkpoint(importable: None, tmp_path: Path) -> None:
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    spec = SB3Checkpoint(str(tmp_path / "model.zip"))
+    weights = []
+    for seed in (1, 2):  # the same path, another model
+        PPO("MlpPolicy", gym.make("Pendulum-v1"), seed=seed, device="cpu").save(spec.path)
+        os.utime(spec.path, ns=(seed * 10**9, seed * 10**9))  # distinct mtimes, however fast
+        recs = run_units(fingerprint, [spec, spec, spec, spec], workers=2)
+        weights.append({r.value[1] for r in recs})
+        pids = {r.value[0] for r in recs}
+    assert len(weights[0]) == len(weights[1]) == 1 and weights[0] != weights[1]
+    assert os.getpid() not in pids and len(pids) <= 2
 
 
 def test_finished_units_are_never_recomputed(importable: None, tmp_path: Path) -> None:

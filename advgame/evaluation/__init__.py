@@ -162,7 +162,15 @@ class _Clocked:
         self._policy = policy
 
     def __getattr__(self, name: str) -> Any:
-        return getattr(self._policy, name)
+        value = getattr(self._policy, name)
+        if name.startswith("act") and callable(value):  # a batched act_* counts as acting too
+
+            def marked(*args: Any, **kwargs: Any) -> Any:
+                first_action()
+                return value(*args, **kwargs)
+
+            return marked
+        return value
 
     def reset(self, seed: int | None = None) -> None:
         """Reset the wrapped policy."""

@@ -1,14 +1,16 @@
 """The local back end of `advgame.evaluation.executor.run_units`: this process or a process pool.
 
-The pool's workers live for the whole call, so what a job loads (SB3 models, normalizers:
-`advgame.training.checkpoint.load_model` caches them per process) serves the later jobs of
-the same worker. A worker that dies breaks a `ProcessPoolExecutor`; the units it and its
+The pool is kept warm across calls (until the process exits, or a call needs another size or
+import path), so what a job loads (SB3 models: `advgame.training.checkpoint.load_model`
+caches them per process; a checkpoint rewritten in place is reloaded, see
+`advgame.evaluation.executor`) serves the later jobs of the same worker. A worker that dies breaks a `ProcessPoolExecutor`; the units it and its
 fellows were running (each marks its start in a scratch folder) are charged one attempt, the
 others go back to the queue free, and a fresh pool carries on.
 """
 
 from __future__ import annotations
 
+import atexit
 import multiprocessing
 import os
 import shutil
@@ -33,7 +35,7 @@ from advgame.evaluation.executor import (
 )
 from advgame.evaluation.executor import _init_worker as init_worker
 
-__all__ = ["run_local"]
+__all__ = ["run_local", "shutdown"]
 
 _PRELOAD = ("advgame.evaluation", "advgame.core.episodes", "advgame.scenarios.mujoco", "mujoco")
 
@@ -104,6 +106,36 @@ def _marked(marks: str, key: str, fn_blob: bytes, blob: bytes, files: dict) -> d
         mark.unlink()
 
 
+_POOL: dict[str, Any] = {}
+"""The warm pool (``"pool"``) and what it was made for (``"key"``: size, start method, path)."""
+
+
+def _pool(workers: int, start_method: str) -> ProcessPoolExecutor:
+    """The process's pool of `workers` workers, kept warm across calls (a new one if broken)."""
+    key = (workers, start_method, tuple(sys.path))
+    pool = _POOL.get("pool")
+    if pool is not None and _POOL["key"] == key and not getattr(pool, "_broken", False):
+        return pool
+    shutdown()
+    ctx = multiprocessing.get_context(start_method)
+    if start_method == "forkserver":
+        _warm_forkserver(ctx)
+    pool = ProcessPoolExecutor(workers, ctx, initializer=init_worker, initargs=(list(sys.path),))
+    _POOL.update(pool=pool, key=key)
+    return pool
+
+
+def shutdown(wait: bool = True) -> None:
+    """Stop the warm pool's workers (at exit, or when a call needs another pool)."""
+    pool = _POOL.pop("pool", None)
+    _POOL.pop("key", None)
+    if pool is not None:
+        pool.shutdown(wait=wait, cancel_futures=True)
+
+
+atexit.register(shutdown)
+
+
 def _round(
     fn_blob: bytes,
     blobs: list[bytes],
@@ -112,46 +144,38 @@ def _round(
     pending: list[int],
     opts: Options,
 ) -> list[int]:
-    """Run `pending` units in one pool; return the units to run again (a pool broke)."""
-    ctx = multiprocessing.get_context(opts.start_method)
-    if opts.start_method == "forkserver":
-        _warm_forkserver(ctx)
+    """Run `pending` units on the warm pool; return the units to run again (the pool broke)."""
     marks = tempfile.mkdtemp(prefix="advgame-marks-")
     again: list[int] = []
     settled: set[int] = set()  # finished, or failed for good
-    n = min(opts.workers, len(pending))
+    pool = _pool(opts.workers, opts.start_method)
+    futures = {}
     try:
-        with ProcessPoolExecutor(
-            n, ctx, initializer=init_worker, initargs=(list(sys.path),)
-        ) as pool:
-            futures = {}
-            for i in pending:
-                recs[i].attempts += 1
-                recs[i].extra["submitted"] = time.time()
-                args = (marks, recs[i].key, fn_blob, blobs[i], files[i])
-                futures[pool.submit(_marked, *args)] = i
+        for i in pending:
+            recs[i].attempts += 1
+            recs[i].extra["submitted"] = time.time()
+            args = (marks, recs[i].key, fn_blob, blobs[i], files[i])
+            futures[pool.submit(_marked, *args)] = i
+        for fut in as_completed(futures):
+            i = futures[fut]
             try:
-                for fut in as_completed(futures):
-                    i = futures[fut]
-                    try:
-                        out = fut.result()
-                    except BrokenProcessPool:
-                        raise
-                    except AdvgameError:
-                        raise
-                    except Exception as exc:
-                        if retry(recs[i], f"{type(exc).__name__}: {exc}", opts):
-                            again.append(i)
-                        settled.add(i)
-                        continue
-                    recs[i].error = None
-                    finish(recs[i], out, opts)
-                    settled.add(i)
-            except BrokenProcessPool:
-                again = _after_break(recs, futures, marks, again, settled, opts)
-            except BaseException:
-                pool.shutdown(wait=False, cancel_futures=True)
+                out = fut.result()
+            except (BrokenProcessPool, AdvgameError):
                 raise
+            except Exception as exc:
+                if retry(recs[i], f"{type(exc).__name__}: {exc}", opts):
+                    again.append(i)
+                settled.add(i)
+                continue
+            recs[i].error = None
+            finish(recs[i], out, opts)
+            settled.add(i)
+    except BrokenProcessPool:
+        shutdown(wait=False)
+        again = _after_break(recs, futures, marks, again, settled, opts)
+    except BaseException:
+        shutdown(wait=False)
+        raise
     finally:
         shutil.rmtree(marks, ignore_errors=True)
     return again

@@ -23,6 +23,8 @@ What every executor guarantees:
   name (``path``/``normalizer`` fields, e.g. `SB3Checkpoint`) go to the workers as bytes in
   Ray's object store and are written to a per-node cache, so a multi-node cluster needs no
   shared file system. ``ship_files=False`` passes paths as they are (a shared file system).
+- **warm workers**: the local pool lives on across calls and Ray reuses its workers, so a
+  loaded checkpoint serves later units; a checkpoint rewritten at the same path is reloaded.
 - **instrumented**: each record holds the worker's pid, start and end times, attempts, and
   ``startup_s``: the time from the unit's start to its protagonist's first action
   (`first_action` marks it), the per-job start-up cost.
@@ -210,6 +212,32 @@ def pickled(obj: Any) -> bytes:
         ) from None
 
 
+_MTIMES: dict[str, int] = {}
+
+
+def _forget_rewritten(unit: Any) -> None:
+    """Drop this worker's cached models if a checkpoint the unit names changed on disk.
+
+    Warm workers keep loaded models (`advgame.training.checkpoint.load_model`, cached by path)
+    across units and calls; a file rewritten at the same path must not be served stale.
+    """
+    changed = False
+
+    def look(_: str, value: Any) -> Any:
+        nonlocal changed
+        if isinstance(value, str) and os.path.isfile(value):
+            mtime = os.stat(value).st_mtime_ns
+            changed |= _MTIMES.setdefault(value, mtime) != mtime
+            _MTIMES[value] = mtime
+        return value
+
+    _walk(unit, look)
+    checkpoint = sys.modules.get("advgame.training.checkpoint")
+    if changed and checkpoint is not None:
+        log.info("a checkpoint changed on disk: reloading models in worker %d", os.getpid())
+        checkpoint.load_model.cache_clear()
+
+
 def execute(fn_blob: bytes, unit_blob: bytes, files: dict[str, bytes]) -> dict[str, Any]:
     """Run one unit in a worker; return its value and timing (`UnitRecord` fields)."""
     import socket
@@ -217,6 +245,7 @@ def execute(fn_blob: bytes, unit_blob: bytes, files: dict[str, bytes]) -> dict[s
     start = time.time()
     _FIRST.clear()
     fn, unit = _loads(fn_blob), _materialize(_loads(unit_blob), files)
+    _forget_rewritten(unit)
     value = fn(unit)
     end = time.time()
     startup = _FIRST[0] - start if _FIRST else None

@@ -275,9 +275,9 @@ class _PSRO:
     def _job(self, side: str, it: int) -> BestResponseJob:
         """The best response of `side` at iteration `it`, against the last meta-strategy."""
         cfg = self.cfg
-        prots, advs = self._members()
         last = self.meta[-1] if self.meta else None
         if side == PROTAGONIST:
+            advs = self._listed(last["adversaries"] if last else None, self.adversary)
             weights = last["adversary_strategy"] if last else [1.0 / len(advs)] * len(advs)
             opponents = {self.adversary: self._mixture(advs, weights, it)}
             algo, hparams, steps = (
@@ -287,6 +287,7 @@ class _PSRO:
             )
         else:
             assert last is not None  # adversaries respond from iteration 1 on
+            prots = self._listed(last["protagonists"], PROTAGONIST)
             opponents = {PROTAGONIST: self._mixture(prots, last["protagonist_strategy"], it)}
             algo, hparams, steps = cfg.adversary_algo, cfg.adversary_hparams, cfg.adversary_steps
         return BestResponseJob(name=f"{side}@{it}", scenario=cfg.scenario,
@@ -294,6 +295,11 @@ class _PSRO:
                                hparams=hparams, opponents=opponents, steps=steps,
                                seed=cfg.seed + 1000 * it + (side != PROTAGONIST),
                                normalize=cfg.normalize)  # fmt: skip
+
+    def _listed(self, ids: list[str] | None, agent: str) -> list[Member]:
+        """The members of `agent` named in the last meta-game (all of them before the first)."""
+        members = {m.id: m for m in self.population.of(agent)}
+        return list(members.values()) if ids is None else [members[i] for i in ids]
 
     def _add_member(self, job: BestResponseJob, result: dict[str, Any], it: int) -> None:
         """Write a best response's files under ``checkpoints/<id>/``; add it as a member."""
