@@ -109,6 +109,29 @@ def test_a_sigkilled_run_resumes_without_recomputing(whole_run: Path, tmp_path: 
     assert json.loads((run / "meta.json").read_text()) == load_meta(whole_run)  # as if never killed
 
 
+def test_the_psro_command_runs_and_resumes(tmp_path: Path) -> None:
+    from advgame.cli import main
+
+    run = tmp_path / "cli"
+    args = ["psro", "--run-dir", str(run), "--scenario", "InvertedPendulum-v5", "--iterations", "0"]
+    args += [
+        "--protagonist-steps",
+        "64",
+        "--set",
+        'protagonist_hparams={"n_steps": 32, "batch_size": 32}',
+    ]
+    args += ["--eval-seeds", "1", "--max-episode-steps", "20", "--solver", "uniform"]
+    assert main(args) == 0
+    (entry,) = load_meta(run)
+    assert entry["solver"] == "uniform" and entry["protagonists"] == ["protagonist@0"]
+    assert json.loads((run / "config.json").read_text())["protagonist_hparams"] == {
+        "n_steps": 32,
+        "batch_size": 32,
+    }
+    assert main(["psro", "--run-dir", str(run), "--resume"]) == 0
+    assert load_meta(run) == [entry]
+
+
 def test_a_run_directory_is_not_started_twice_and_configs_are_checked(whole_run: Path) -> None:
     with pytest.raises(ConfigError, match="resume_psro"):
         run_psro(TINY, whole_run)

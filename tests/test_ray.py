@@ -77,6 +77,16 @@ def still_hopper(obs: np.ndarray) -> np.ndarray:
     return np.zeros(3, dtype=np.float32)
 
 
+def fail(unit: tuple[str, str]) -> int:
+    """Raise the error the unit names (or return 1 for "ok"), logging each attempt."""
+    folder, kind = unit
+    with Path(folder, "tries").open("a") as f:
+        f.write(kind[0])
+    if kind == "ok":
+        return 1
+    raise {"config": ConfigError, "runtime": RuntimeError}[kind](f"{kind} trouble")
+
+
 def fingerprint(spec: SB3Checkpoint) -> tuple[int, float]:
     """This worker's pid and the sum of the weights of the model it has for `spec`."""
     from advgame.training.checkpoint import load_model
@@ -207,6 +217,22 @@ def test_finished_units_are_never_recomputed(importable: None, tmp_path: Path) -
     calls = sorted(int(n) for n in (tmp_path / "calls").read_text().split())
     assert calls == [0, 1, 2, 3, 4]  # units 0-2 ran once, in the first call only
     assert [r.attempts for r in again] == [0, 0, 0, 1, 1]
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_errors_a_user_made_are_raised_at_once_others_retried(
+    importable: None, tmp_path: Path, workers: int
+) -> None:
+    with pytest.raises(ConfigError, match="config trouble"):
+        run_units(fail, [(str(tmp_path), "config")], workers=workers, max_retries=3)
+    assert (tmp_path / "tries").read_text() == "c"  # an AdvgameError is not retried
+    (tmp_path / "tries").unlink()
+    units = [(str(tmp_path), "runtime"), (str(tmp_path), "ok")]
+    with pytest.raises(JobFailedError, match="RuntimeError: runtime trouble") as info:
+        run_units(fail, units, workers=workers, max_retries=2, parts_dir=tmp_path / "parts")
+    assert sorted((tmp_path / "tries").read_text()) == ["o", "r", "r", "r"]
+    assert [u for u, _ in info.value.failures] == units[:1]
+    assert len(list((tmp_path / "parts").glob("*.pkl"))) == 1  # the good unit is kept
 
 
 def test_executor_arguments_are_checked() -> None:
