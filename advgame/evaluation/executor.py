@@ -49,6 +49,7 @@ from advgame.errors import AdvgameError, ConfigError
 
 __all__ = [
     "EXECUTORS",
+    "close_pool",
     "JobFailedError",
     "UnitRecord",
     "digest",
@@ -251,6 +252,13 @@ def execute(fn_blob: bytes, unit_blob: bytes, files: dict[str, bytes]) -> dict[s
     startup = _FIRST[0] - start if _FIRST else None
     info = {"pid": os.getpid(), "host": socket.gethostname(), "start": start, "end": end}
     return {"value": value, "startup_s": startup, **info}
+
+
+def close_pool() -> None:
+    """Stop the local pool's warm workers now (otherwise they live until this process exits)."""
+    from advgame.evaluation import _local
+
+    _local.shutdown()
 
 
 def write_timings(records: Sequence[UnitRecord], path: str | Path) -> None:
