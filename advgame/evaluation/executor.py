@@ -49,9 +49,9 @@ from advgame.errors import AdvgameError, ConfigError
 
 __all__ = [
     "EXECUTORS",
-    "close_pool",
     "JobFailedError",
     "UnitRecord",
+    "close_pool",
     "digest",
     "first_action",
     "run_units",
