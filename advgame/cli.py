@@ -1,4 +1,4 @@
-"""The ``advgame`` command: list scenarios, train, resume, evaluate, report, and the demo.
+"""The ``advgame`` command: list scenarios, train, resume, evaluate, psro, report, and the demo.
 
 Run ``advgame --help`` or ``advgame COMMAND --help``.
 """
@@ -27,6 +27,9 @@ EPILOG = """examples:
   advgame evaluate --scenario Hopper-v5 --checkpoint mine=model.zip:ppo \
       --normalizer mine=vecnormalize.pkl \
       --adversaries preset:state-gauss-0.1 population:runs/atla --last 5 --out results/mine
+  advgame evaluate runs/atla --out results/ray --executor ray --address auto
+  advgame psro --scenario Hopper-v5 --preset rarl --iterations 3 --solver nash --run-dir runs/psro
+  advgame psro --run-dir runs/psro --resume --executor ray
   advgame report results/hopper
   advgame demo
 """
@@ -81,6 +84,13 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from advgame.evaluation import use_executor
+
+    with use_executor(args.executor, args.address):
+        return _evaluate(args)
+
+
+def _evaluate(args: argparse.Namespace) -> int:
     from advgame.evaluation.suite import BUDGETS, evaluate_runs
 
     out = evaluate_runs(
@@ -105,6 +115,31 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     )
     print(f"report: {out}")
     return 0
+
+
+def _cmd_psro(args: argparse.Namespace) -> int:
+    from advgame.core.config import from_dict, override, to_dict
+    from advgame.training.psro import PSROConfig, resume_psro, run_psro
+
+    where = {"executor": args.executor, "workers": args.workers, "address": args.address}
+    if args.resume:
+        resume_psro(args.run_dir, **where)
+    else:
+        data = to_dict(PSROConfig())
+        data.update({k: getattr(args, k) for k in data if getattr(args, k, None) is not None})
+        run_psro(override(from_dict(PSROConfig, data), args.set or []), args.run_dir, **where)
+    print(f"PSRO run in {args.run_dir}; meta-game: {Path(args.run_dir) / 'report.md'}")
+    return 0
+
+
+def _executor_arguments(p: argparse.ArgumentParser, workers: int) -> None:
+    """Where jobs run (`advgame.evaluation.executor`)."""
+    p.add_argument("--workers", type=int, default=workers,
+                   help=f"local worker processes, or the CPUs of a local Ray (default {workers})")  # fmt: skip
+    p.add_argument("--executor", choices=("local", "ray"), default="local",
+                   help="run jobs in a local process pool (default) or as Ray tasks (advgame[ray])")  # fmt: skip
+    p.add_argument("--address", help="Ray cluster address (e.g. auto, ray://head:10001); default: "
+                   "a local Ray started for this command")  # fmt: skip
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
@@ -178,6 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``advgame`` (exposed for documentation and tests)."""
     from advgame.core.config import add_arguments, field_docs, scalar_field
     from advgame.training import METHODS, TrainConfig
+    from advgame.training.psro import PSROConfig
 
     parser = argparse.ArgumentParser(
         prog="advgame",
@@ -239,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder (CSV, JSON, plots, report.md)")
     p.add_argument("--seeds", type=int, default=3, help="evaluation seeds per cell (default 3)")
     p.add_argument("--episodes", type=int, default=1, help="episodes per seed (default 1)")
-    p.add_argument("--workers", type=int, default=2, help="parallel worker processes (default 2)")
+    _executor_arguments(p, workers=2)
     p.add_argument(
         "--exploitability",
         type=int,
@@ -248,6 +284,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="train a best-response adversary for STEPS steps per protagonist",
     )
     p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser(
+        "psro",
+        help="population training, PSRO-style: best responses and payoffs as jobs",
+        description="Each iteration trains a protagonist best response to the adversaries' "
+        "meta-strategy and an adversary best response to the protagonists' (as parallel jobs), "
+        "evaluates the new payoff entries, and solves the meta-game (uniform, fictitious, nash).",
+    )
+    p.add_argument("--run-dir", required=True, help="the run directory")
+    p.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a config field with a JSON value (e.g. protagonist_hparams)")  # fmt: skip
+    _executor_arguments(p, workers=1)
+    add_arguments(p, PSROConfig)
+    p.set_defaults(func=_cmd_psro)
 
     p = sub.add_parser("report", help="rebuild the report (Markdown + PNG) of an evaluation folder")
     p.add_argument("folder", help="a folder written by `advgame evaluate` or `advgame demo`")

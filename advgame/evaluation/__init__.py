@@ -1,8 +1,8 @@
 """Robust evaluation: payoff tables of protagonists × adversaries × seeds, and robust metrics.
 
 One `EvalJob` is one cell of the payoff matrix: a protagonist against one adversary set-up over
-some seeds. Jobs are pure, picklable values, so `evaluate` runs them in this process or in a
-process pool (and the same jobs could be shipped to Ray tasks unchanged). Every episode becomes
+some seeds. Jobs are pure, picklable values, so `evaluate` runs them (one unit per seed) in
+this process, in a process pool or as Ray tasks (`advgame.evaluation.executor`). Every episode becomes
 one row of a `PayoffTable`, which saves to CSV/JSON and computes the design's robust metrics on
 the *true* return: nominal, mean, worst case, CVaR and the degradation from nominal::
 
@@ -31,16 +31,14 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
-import multiprocessing
-import os
-import pickle
 import sys
 from collections.abc import Iterable, Iterator, Mapping
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
 from typing import Any
 
 from advgame.errors import ConfigError
 from advgame.evaluation.columns import COLUMN_KINDS, adversary_columns, describe_column
+from advgame.evaluation.executor import EXECUTORS, first_action, run_units, write_timings
 from advgame.evaluation.jobs import (
     SEED_STRIDE,
     AdversarySetup,
@@ -48,6 +46,7 @@ from advgame.evaluation.jobs import (
     budget_sweep,
     population_jobs,
     shift_grid,
+    split_seeds,
 )
 from advgame.evaluation.payoff import (
     COLUMNS,
@@ -68,6 +67,7 @@ from advgame.evaluation.protagonists import (
 __all__ = [
     "COLUMNS",
     "COLUMN_KINDS",
+    "EXECUTORS",
     "NOMINAL",
     "SEED_STRIDE",
     "AdversarySetup",
@@ -87,7 +87,9 @@ __all__ = [
     "run_protagonist",
     "sb3_protagonist",
     "shift_grid",
+    "split_seeds",
     "team_protagonist",
+    "use_executor",
     "worst_case",
 ]
 
@@ -101,9 +103,6 @@ def __getattr__(name: str) -> Any:
 
         return evaluate_policies
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-_PRELOAD = ("advgame.evaluation", "advgame.core.episodes", "advgame.scenarios.mujoco", "mujoco")
 
 
 @contextlib.contextmanager
@@ -153,66 +152,63 @@ def run_job(job: EvalJob) -> list[dict[str, Any]]:
     return rows
 
 
-def _init_worker(path: list[str]) -> None:
-    """Pool initializer: the caller's import path; one thread for torch and BLAS."""
-    sys.path[:] = path
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ[var] = "1"  # read by torch and BLAS when (and if) a job imports them
-    if "torch" in sys.modules:
-        sys.modules["torch"].set_num_threads(1)
+class _Clocked:
+    """A protagonist policy that marks its first action (`executor.first_action`).
 
-
-def _run_pickled(blob: bytes) -> list[dict[str, Any]]:
-    try:
-        job = pickle.loads(blob)
-    except Exception as exc:  # e.g. a callable whose module a fresh process cannot import
-        raise ConfigError(
-            f"A worker process cannot load a job: {type(exc).__name__}: {exc}. Define callables "
-            "and specs at module level of an importable module, or use workers=1."
-        ) from None
-    return run_job(job)
-
-
-def _pickled(job: EvalJob) -> bytes:
-    try:
-        return pickle.dumps(job)
-    except Exception as exc:
-        raise ConfigError(
-            f"Job {job.protagonist!r} vs {job.adversary!r} cannot go to a worker process "
-            f"({type(exc).__name__}: {exc}). Use module-level functions, not lambdas or "
-            "closures, and specs rather than live policies; or use workers=1."
-        ) from None
-
-
-def _warm_forkserver(ctx: Any) -> None:
-    """Preload the simulators (and torch and SB3, if used here) in a forkserver yet to start.
-
-    The forkserver then imports them once, and the workers of every later pool start warm.
+    Everything else is forwarded to the policy it wraps (white-box attacks see its methods).
     """
-    from multiprocessing import forkserver
 
-    heavy = [m for m in ("torch", "torch._dynamo", "stable_baselines3") if m in sys.modules]
-    server = getattr(forkserver, "_forkserver", None)  # keep what the user asked to preload
-    theirs = list(getattr(server, "_preload_modules", None) or ["__main__"])
-    ctx.set_forkserver_preload(list(dict.fromkeys([*theirs, *_PRELOAD, *heavy])))
+    def __init__(self, policy: Any) -> None:
+        self._policy = policy
+
+    def __getattr__(self, name: str) -> Any:
+        value = getattr(self._policy, name)
+        if name.startswith("act") and callable(value):  # a batched act_* counts as acting too
+
+            def marked(*args: Any, **kwargs: Any) -> Any:
+                first_action()
+                return value(*args, **kwargs)
+
+            return marked
+        return value
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reset the wrapped policy."""
+        self._policy.reset(seed)
+
+    def act(self, observation: Any) -> Any:
+        """Mark the first action, then act as the wrapped policy."""
+        first_action()
+        return self._policy.act(observation)
 
 
-def _pool_map(blobs: list[bytes], workers: int, start_method: str, bar: Any) -> list[list[dict]]:
-    out: list[list[dict]] = [[] for _ in blobs]
-    ctx = multiprocessing.get_context(start_method)
-    if start_method == "forkserver":
-        _warm_forkserver(ctx)
-    n, path = min(workers, len(blobs)), list(sys.path)
-    with ProcessPoolExecutor(n, ctx, initializer=_init_worker, initargs=(path,)) as pool:
-        futures = {pool.submit(_run_pickled, b): i for i, b in enumerate(blobs)}
-        try:
-            for fut in as_completed(futures):
-                out[futures[fut]] = fut.result()
-                bar.update()
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-    return out
+@dataclasses.dataclass(frozen=True)
+class _ClockedSpec:
+    """Builds `spec` (a spec, policy or callable) wrapped in `_Clocked`."""
+
+    spec: Any
+
+    def build(self, info: Any) -> _Clocked:
+        """Build the wrapped policy for `info`'s agent."""
+        from advgame.core.policy import as_policy
+
+        return _Clocked(as_policy(self.spec, info))
+
+
+def _clocked(job: EvalJob) -> EvalJob:
+    """`job` with its protagonist policies marking their first action (start-up cost)."""
+    prot = job.protagonist_spec
+    wrapped = (
+        {a: _ClockedSpec(s) for a, s in prot.items()}
+        if isinstance(prot, Mapping)
+        else _ClockedSpec(prot)
+    )
+    return dataclasses.replace(job, protagonist_spec=wrapped)
+
+
+def run_unit(job: EvalJob) -> list[dict[str, Any]]:
+    """Play one job, its protagonists timed to their first action: what workers run."""
+    return run_job(_clocked(job))
 
 
 def evaluate(
@@ -220,18 +216,34 @@ def evaluate(
     workers: int = 1,
     progress: bool = True,
     start_method: str = "forkserver",
+    executor: str | None = None,
+    address: str | None = None,
+    *,
+    max_retries: int = 2,
+    results_dir: str | Path | None = None,
+    ship_files: bool | None = None,
 ) -> PayoffTable:
     """Run `jobs`; return their rows, in job order (whatever the workers), as a `PayoffTable`.
 
-    A pool plays each seed of a job as its own task (the rows are the same: `run_job` builds
-    policies afresh per seed), which keeps both workers busy to the end.
+    Each job runs as one unit per seed (`split_seeds`: the rows are the same, as `run_job`
+    builds policies afresh per seed), so a long cell does not hold up a whole table. Units
+    run on `advgame.evaluation.executor.run_units`: retried when a worker dies, and never
+    recomputed after a restart when `results_dir` is given.
 
     Args:
         jobs: the cells to play.
-        workers: 1 plays in this process; more plays in a `ProcessPoolExecutor`.
+        workers: local: 1 plays in this process, more in a process pool; Ray: units in flight
+            at once (and the CPUs of the local Ray it starts if none is running).
         progress: show a tqdm progress bar on stderr.
-        start_method: ``"forkserver"`` or ``"spawn"`` (not fork: simulators and torch hold
-            threads and GL contexts that do not survive it).
+        start_method: local pool: ``"forkserver"`` or ``"spawn"`` (not fork: simulators and
+            torch hold threads and GL contexts that do not survive it).
+        executor: ``"local"`` or ``"ray"``; None: the default of `use_executor` (``"local"``).
+        address: Ray cluster address (``"auto"``, ``"ray://head:10001"``); None: a Ray already
+            initialized here, or a new local one.
+        max_retries: extra attempts of a unit whose worker died.
+        results_dir: a folder for one part file per finished unit (``parts/``) and the units'
+            timings (``jobs.jsonl``: pid, start, end, attempts, start-up seconds).
+        ship_files: send checkpoint files to the workers as bytes (default: on Ray only).
 
     """
     from tqdm.auto import tqdm
@@ -241,17 +253,36 @@ def evaluate(
         raise ConfigError("evaluate() takes EvalJob objects; build them with population_jobs().")
     if type(workers) is not int or workers < 1:
         raise ConfigError(f"workers must be an int >= 1, got {workers!r}.")
-    if start_method not in ("forkserver", "spawn"):
-        raise ConfigError(f"start_method must be 'forkserver' or 'spawn', got {start_method!r}.")
-    pool = workers > 1 and sum(len(j.seeds) for j in jobs) > 1
-    units = [dataclasses.replace(j, seeds=(s,)) for j in jobs for s in j.seeds] if pool else jobs
-    log.info("evaluating %d jobs (%d tasks) on %d worker(s)", len(jobs), len(units), workers)
+    kind, address = (executor, address) if executor is not None else _DEFAULT_EXECUTOR
+    units = split_seeds(jobs)
+    log.info(
+        "evaluating %d jobs (%d units) on %s, %d worker(s)", len(jobs), len(units), kind, workers
+    )
+    out = Path(results_dir) if results_dir is not None else None
     with tqdm(total=len(units), desc="evaluate", file=sys.stderr, disable=not progress) as bar:
-        if pool:
-            out = _pool_map([_pickled(j) for j in units], workers, start_method, bar)
-        else:
-            out = []
-            for job in units:
-                out.append(run_job(job))
-                bar.update()
-    return PayoffTable(row for rows in out for row in rows)
+        records = run_units(run_unit, units, executor=kind, workers=workers, address=address,
+                            max_retries=max_retries, parts_dir=out and out / "parts",
+                            ship_files=ship_files, start_method=start_method, progress=bar)  # fmt: skip
+    if out is not None:
+        write_timings(records, out / "jobs.jsonl")
+    return PayoffTable(row for rec in records for row in rec.value)
+
+
+_DEFAULT_EXECUTOR: tuple[str, str | None] = ("local", None)
+
+
+@contextlib.contextmanager
+def use_executor(executor: str, address: str | None = None) -> Iterator[None]:
+    """Make `executor` (and `address`) the default of every `evaluate` call inside the block.
+
+    This is how callers that do not pass `executor` (``evaluate_policies``, the CLI's
+    ``advgame evaluate --executor ray``) run on Ray with the very same code path.
+    """
+    global _DEFAULT_EXECUTOR
+    if executor not in EXECUTORS:
+        raise ConfigError(f"executor must be one of {EXECUTORS}, got {executor!r}.")
+    before, _DEFAULT_EXECUTOR = _DEFAULT_EXECUTOR, (executor, address)
+    try:
+        yield
+    finally:
+        _DEFAULT_EXECUTOR = before

@@ -12,7 +12,7 @@ import itertools
 import math
 import operator
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, cast
 
 import numpy as np
@@ -27,6 +27,7 @@ __all__ = [
     "budget_sweep",
     "population_jobs",
     "shift_grid",
+    "split_seeds",
 ]
 
 SEED_STRIDE = 10_000
@@ -108,6 +109,23 @@ class EvalJob:
         bad = {k: v for k, v in self.tags.items() if k in COLUMNS or not np.isscalar(v)}
         if bad:
             raise ConfigError(f"tags {bad} must be scalars named apart from the columns {COLUMNS}.")
+
+
+def split_seeds(jobs: Sequence[EvalJob]) -> list[EvalJob]:
+    """Return one job per (job, seed): the units workers run, in row order.
+
+    `run_job` builds policies afresh for every seed, so the rows of the split jobs are the
+    rows of the whole ones; finer units balance the workers and make each finished seed a
+    result that a restart keeps.
+
+    Example:
+        >>> job = EvalJob(scenario="Hopper-v5", protagonist="zero", protagonist_spec=abs,
+        ...               seeds=(0, 1, 2))
+        >>> [u.seeds for u in split_seeds([job])]
+        [(0,), (1,), (2,)]
+
+    """
+    return [replace(j, seeds=(s,)) for j in jobs for s in j.seeds]
 
 
 # -- building populations of jobs -----------------------------------------------------------

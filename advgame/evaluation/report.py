@@ -25,11 +25,13 @@ from advgame.evaluation import NOMINAL, PayoffTable, ci95
 __all__ = [
     "DEFAULT_COST_LIMIT",
     "adversary_listing",
+    "meta_game_section",
     "plot_budget_curve",
     "plot_heatmap",
     "plot_safety",
     "plot_training_curves",
     "runs_cost_limit",
+    "write_meta_report",
     "write_report",
 ]
 
@@ -360,3 +362,42 @@ def _rel(path: str | Path, start: Path) -> str:
         return Path(os.path.relpath(Path(path).resolve(), start.resolve())).as_posix()
     except ValueError:  # another drive (Windows)
         return Path(path).resolve().as_posix()
+
+
+# -- the meta-game of a population run (advgame.training.psro) -------------------------------
+def meta_game_section(meta: Sequence[Mapping[str, Any]]) -> str:
+    """Markdown: per iteration, the meta-game matrix with each side's meta-strategy.
+
+    `meta` is `advgame.training.psro.load_meta`'s list. Rows are protagonists, columns
+    adversaries; a cell is the protagonist's mean true return; the last column and row give
+    the protagonists' and the adversaries' meta-strategy probabilities.
+    """
+    parts = ["## Meta-game", ""]
+    for entry in meta:
+        advs, prots = entry["adversaries"], entry["protagonists"]
+        rows = [
+            [p, *[_fmt(v) for v in values], f"{q:.3f}"]
+            for p, values, q in zip(
+                prots, entry["matrix"], entry["protagonist_strategy"], strict=True
+            )
+        ]
+        rows.append(["adversary strategy", *[f"{q:.3f}" for q in entry["adversary_strategy"]], ""])
+        parts += [
+            f"### Iteration {entry['iteration']} ({entry['solver']}: value {_fmt(entry['value'])})",
+            "",
+            _md_table(["protagonist \\ adversary", *advs, "protagonist strategy"], rows),
+            "",
+        ]
+    return "\n".join(parts)
+
+
+def write_meta_report(run_dir: str | Path) -> Path:
+    """Write ``report.md`` of a PSRO run directory (its meta-game section); return its path."""
+    import json
+
+    run_dir = Path(run_dir)
+    meta = json.loads((run_dir / "meta.json").read_text())
+    text = f"# Population training: {run_dir.name}\n\n" + meta_game_section(meta)
+    path = run_dir / "report.md"
+    path.write_text(text + "\n")
+    return path

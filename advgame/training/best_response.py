@@ -1,0 +1,171 @@
+"""Best-response training as a job: one learner against a fixed mixture of opponents.
+
+A `BestResponseJob` is a pure, picklable value; `train_best_response` trains its learner
+(`advgame.training.learning.Side`, an SB3 model on a `SingleAgentView`) against a
+`MixtureSpec` of the other side's policies and returns the checkpoint *as bytes*, so the job
+can run on any worker of any node (`advgame.evaluation.executor.run_units`) and the driver
+writes the files where the run keeps them. `advgame.training.psro` builds these jobs.
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from advgame.errors import ConfigError
+
+__all__ = ["BestResponseJob", "MixturePolicy", "MixtureSpec", "train_best_response"]
+
+log = logging.getLogger(__name__)
+
+_CHUNKS = 4
+"""A learner behind a normalizer trains in this many chunks, its normalized-space budgets
+given the normalizer's current std before each (as the alternation loop does per phase)."""
+
+
+class MixturePolicy:
+    """Plays one of its policies per episode, drawn with the mixture's weights at each reset."""
+
+    def __init__(self, policies: list[Any], weights: np.ndarray, seed: int) -> None:
+        self.policies, self.weights = policies, weights
+        self.rng = np.random.default_rng(seed)
+        self.current = policies[0]
+
+    def __getattr__(self, name: str) -> Any:  # e.g. observation_std of the drawn checkpoint
+        return getattr(self.__dict__.get("current"), name)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Draw this episode's policy (a seed restarts the draws) and reset it."""
+        if seed is not None:
+            self.rng = np.random.default_rng([seed, 7919])
+        self.current = self.policies[int(self.rng.choice(len(self.policies), p=self.weights))]
+        self.current.reset(seed)
+
+    def act(self, observation: Any) -> Any:
+        """Act as this episode's policy."""
+        return self.current.act(observation)
+
+
+@dataclass(frozen=True)
+class MixtureSpec:
+    """A meta-strategy as a policy spec: specs and their probabilities (one draw per episode)."""
+
+    specs: tuple[Any, ...]
+    """The members' policy specs."""
+    weights: tuple[float, ...]
+    """Their probabilities (>= 0, summing to 1)."""
+    seed: int = 0
+    """Seeds the draws."""
+
+    def __post_init__(self) -> None:
+        w = np.asarray(self.weights, dtype=float)
+        if len(self.specs) != len(w) or not self.specs:
+            raise ConfigError(
+                f"A mixture needs one weight per spec, got {len(w)} for {len(self.specs)}."
+            )
+        if w.min() < 0 or abs(w.sum() - 1) > 1e-6:
+            raise ConfigError(f"Mixture weights must be >= 0 and sum to 1, got {self.weights}.")
+
+    def build(self, info: Any) -> MixturePolicy:
+        """Build every member's policy for `info`'s agent."""
+        from advgame.core.policy import as_policy
+
+        w = np.asarray(self.weights, dtype=float)
+        return MixturePolicy([as_policy(s, info) for s in self.specs], w / w.sum(), self.seed)
+
+
+@dataclass(frozen=True, kw_only=True)
+class BestResponseJob:
+    """Train `agent` for `steps` against `opponents` (a mixture of the other side's policies)."""
+
+    name: str
+    """The member id the result becomes (e.g. ``"protagonist@2"``)."""
+    scenario: str
+    """Registered scenario id."""
+    make_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    """`advgame.make` options (``preset=``, task options); ``phase`` is ``"train"``."""
+    agent: str
+    """The learner's agent id."""
+    algo: str = "ppo"
+    """Its learner (`advgame.training.learner_config`)."""
+    hparams: Mapping[str, Any] | None = None
+    """Learner config overrides."""
+    opponents: Mapping[str, MixtureSpec]
+    """``{agent id: mixture}`` of the agents it plays against."""
+    steps: int
+    """Environment steps to train."""
+    seed: int = 0
+    """Seeds the model, the views and the mixture draws."""
+    normalize: bool = True
+    """Train behind a `VecNormalize` (observations and rewards)."""
+
+
+def _normalized_targets(job: BestResponseJob) -> list[str]:
+    from advgame.core.registry import make
+
+    game = make(job.scenario, **job.make_kwargs)
+    game.close()
+    normalized = [
+        d for d in game.disruptors.values() if getattr(d.spec, "space", "raw") == "normalized"
+    ]
+    return sorted({t for d in normalized for t in getattr(d, "targets", ())})
+
+
+def _opponent_std(job: BestResponseJob) -> np.ndarray | None:
+    """The std of the most likely opponent checkpoint's normalizer (None without one)."""
+    from advgame.training.checkpoint import load_normalizer
+
+    for mix in job.opponents.values():
+        spec = mix.specs[int(np.argmax(mix.weights))]
+        path = getattr(spec, "normalizer", None)
+        norm = load_normalizer(str(path)) if path else None
+        if norm is not None:
+            return np.sqrt(norm.var + norm.epsilon)
+    return None
+
+
+def train_best_response(job: BestResponseJob) -> dict[str, Any]:
+    """Train the job's learner; return ``{"files": {name: bytes}, "model", "normalizer", "algo"}``."""
+    import torch
+
+    from advgame.core.views import view_factory
+    from advgame.training.config import learner_config
+    from advgame.training.learning import Side
+
+    torch.set_num_threads(1)
+    learner = learner_config(job.algo, dict(job.hparams or {}))
+    kwargs = {**job.make_kwargs, "phase": "train"}
+    fns = [view_factory(job.scenario, job.agent, dict(job.opponents), **kwargs)]
+    targets = _normalized_targets(job)
+    side = Side(job.agent, learner, fns, job.seed, job.steps, normalize=job.normalize)
+    try:
+        learner_is_victim = job.agent in targets
+        chunks = _CHUNKS if targets and (learner_is_victim and side.normalized) else 1
+        fixed = None if learner_is_victim else _opponent_std(job)
+        done = 0
+        for k in range(chunks):
+            std = side.observation_std() if learner_is_victim else fixed
+            if std is not None:
+                for target in targets:
+                    side.set_observation_scale(target, std)
+            part = job.steps * (k + 1) // chunks - done
+            side.learn(part)
+            done += part
+        with tempfile.TemporaryDirectory(prefix="advgame-br-") as tmp:
+            spec = side.save(Path(tmp))
+            files = {p.name: p.read_bytes() for p in Path(tmp).iterdir() if p.is_file()}
+    finally:
+        side.close()
+    log.info("best response %s: %d steps", job.name, side.steps)
+    return {
+        "files": files,
+        "model": Path(spec.path).name,
+        "normalizer": Path(spec.normalizer).name if spec.normalizer else None,
+        "algo": spec.algo,
+    }

@@ -1,0 +1,144 @@
+"""PSRO-style population training: the meta-game grows, and a SIGKILLed run resumes.
+
+A tiny run: InvertedPendulum with RARL forces, 50-step episodes, 128-step PPO best
+responses, 2 iterations after the seeding one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from advgame.errors import ConfigError
+from advgame.evaluation.metasolver import nash
+from advgame.training.population import Population
+from advgame.training.psro import PSROConfig, load_meta, resume_psro, run_psro
+
+TINY = PSROConfig(
+    scenario="InvertedPendulum-v5",
+    preset="rarl",
+    iterations=2,
+    protagonist_steps=128,
+    adversary_steps=128,
+    protagonist_hparams={"n_steps": 64},
+    adversary_hparams={"n_steps": 64},
+    eval_seeds=2,
+    max_episode_steps=50,
+)
+
+
+@pytest.fixture(scope="module")
+def whole_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The tiny run, uninterrupted, in this process."""
+    return run_psro(TINY, tmp_path_factory.mktemp("psro") / "run")
+
+
+def test_each_iteration_adds_one_best_response_per_side(whole_run: Path) -> None:
+    meta = load_meta(whole_run)
+    assert [m["iteration"] for m in meta] == [0, 1, 2]
+    for m in meta:
+        k = m["iteration"]
+        assert m["protagonists"] == [f"protagonist@{i}" for i in range(k + 1)]
+        assert m["adversaries"] == ["force_adversary:noop"] + [
+            f"force_adversary@{i}" for i in range(1, k + 1)
+        ]
+        matrix = np.array(m["matrix"])
+        assert matrix.shape == (k + 1, k + 1) and np.isfinite(matrix).all()
+        row, col = nash(matrix)  # the stored strategies are the solver's, of this matrix
+        np.testing.assert_allclose(m["protagonist_strategy"], row, atol=1e-9)
+        np.testing.assert_allclose(m["adversary_strategy"], col, atol=1e-9)
+    # the matrix only grows: earlier entries are kept as they were
+    assert np.array(meta[2]["matrix"])[:2, :2].tolist() == meta[1]["matrix"]
+    members = Population.load(whole_run / "population.json")
+    assert all(Path(m.spec.path).is_file() for m in members if m.learned)
+    report = (whole_run / "report.md").read_text()
+    assert "### Iteration 2 (nash" in report and "| protagonist@2 |" in report
+
+
+_CHILD = """
+import sys
+from advgame.training.psro import PSROConfig, run_psro
+cfg = PSROConfig(**{cfg})
+run_psro(cfg, sys.argv[1], workers=2)
+"""
+
+
+def _mtimes(folder: Path) -> dict[str, int]:
+    return {
+        str(p.relative_to(folder)): p.stat().st_mtime_ns for p in folder.rglob("*") if p.is_file()
+    }
+
+
+def test_a_sigkilled_run_resumes_without_recomputing(whole_run: Path, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    fields = {k: getattr(TINY, k) for k in TINY.__dataclass_fields__}
+    code = _CHILD.format(cfg=repr(fields))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    child = subprocess.Popen(
+        [sys.executable, "-c", code, str(run)], env=env, start_new_session=True
+    )
+    try:
+        deadline = time.monotonic() + 240
+        while len(list((run / "jobs").glob("*.pkl"))) < 2:  # iteration 1 half trained
+            assert child.poll() is None, "the run ended before it could be killed"
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        os.killpg(child.pid, signal.SIGKILL)  # the run and its pool's workers
+    finally:
+        child.wait()
+    assert len(load_meta(run)) < 3
+    before = {
+        k: v
+        for k, v in _mtimes(run).items()
+        if k.startswith(("jobs/", "payoff/parts/", "checkpoints/"))
+    }
+    assert any(k.startswith("payoff/parts/") for k in before) and any(
+        k.startswith("jobs/") for k in before
+    )
+    resume_psro(run)
+    after = _mtimes(run)
+    assert all(after.get(k) == v for k, v in before.items())  # nothing finished was redone
+    assert json.loads((run / "meta.json").read_text()) == load_meta(whole_run)  # as if never killed
+
+
+def test_the_psro_command_runs_and_resumes(tmp_path: Path) -> None:
+    from advgame.cli import main
+
+    run = tmp_path / "cli"
+    args = ["psro", "--run-dir", str(run), "--scenario", "InvertedPendulum-v5", "--iterations", "0"]
+    args += [
+        "--protagonist-steps",
+        "64",
+        "--set",
+        'protagonist_hparams={"n_steps": 32, "batch_size": 32}',
+    ]
+    args += ["--eval-seeds", "1", "--max-episode-steps", "20", "--solver", "uniform"]
+    assert main(args) == 0
+    (entry,) = load_meta(run)
+    assert entry["solver"] == "uniform" and entry["protagonists"] == ["protagonist@0"]
+    assert json.loads((run / "config.json").read_text())["protagonist_hparams"] == {
+        "n_steps": 32,
+        "batch_size": 32,
+    }
+    assert main(["psro", "--run-dir", str(run), "--resume"]) == 0
+    assert load_meta(run) == [entry]
+
+
+def test_a_run_directory_is_not_started_twice_and_configs_are_checked(whole_run: Path) -> None:
+    with pytest.raises(ConfigError, match="resume_psro"):
+        run_psro(TINY, whole_run)
+    assert resume_psro(whole_run) == whole_run  # finished: nothing to do
+    with pytest.raises(ConfigError, match="solver"):
+        PSROConfig(solver="nahs")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="force_adversary"):
+        run_psro(
+            PSROConfig(scenario="InvertedPendulum-v5", adversary="wind"), whole_run.parent / "x"
+        )
