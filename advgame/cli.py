@@ -119,7 +119,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 def _cmd_psro(args: argparse.Namespace) -> int:
     from advgame.core.config import from_dict, override, to_dict
-    from advgame.training.psro import PSROConfig, resume_psro, run_psro
+    from advgame.psro import PSROConfig, resume_psro, run_psro
 
     where = {"executor": args.executor, "workers": args.workers, "address": args.address}
     if args.resume:
@@ -212,8 +212,8 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``advgame`` (exposed for documentation and tests)."""
     from advgame.core.config import add_arguments, field_docs, scalar_field
+    from advgame.psro import PSROConfig
     from advgame.training import METHODS, TrainConfig
-    from advgame.training.psro import PSROConfig
 
     parser = argparse.ArgumentParser(
         prog="advgame",

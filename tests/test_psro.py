@@ -19,8 +19,8 @@ import pytest
 
 from advgame.errors import ConfigError
 from advgame.evaluation.metasolver import nash
+from advgame.psro import PSROConfig, load_meta, resume_psro, run_psro
 from advgame.training.population import Population
-from advgame.training.psro import PSROConfig, load_meta, resume_psro, run_psro
 
 TINY = PSROConfig(
     scenario="InvertedPendulum-v5",
@@ -65,7 +65,7 @@ def test_each_iteration_adds_one_best_response_per_side(whole_run: Path) -> None
 
 _CHILD = """
 import sys
-from advgame.training.psro import PSROConfig, run_psro
+from advgame.psro import PSROConfig, run_psro
 cfg = PSROConfig(**{cfg})
 run_psro(cfg, sys.argv[1], workers=2)
 """

@@ -164,7 +164,7 @@ def test_the_cli_evaluates_on_ray_with_the_same_table(
 
 
 def test_psro_on_ray_equals_psro_here(local_ray: None, tmp_path: Path) -> None:
-    from advgame.training.psro import PSROConfig, load_meta, run_psro
+    from advgame.psro import PSROConfig, load_meta, run_psro
 
     cfg = PSROConfig(scenario="InvertedPendulum-v5", preset="rarl", iterations=1,
                      protagonist_steps=128, adversary_steps=128, protagonist_hparams={"n_steps": 64},

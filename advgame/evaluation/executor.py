@@ -2,7 +2,7 @@
 
 `run_units(fn, units, ...)` calls the module-level function ``fn`` on every picklable unit and
 returns one `UnitRecord` per unit, in order. Evaluation (`advgame.evaluation.evaluate`, one unit
-per cell and seed) and population training (`advgame.training.psro`, one unit per best
+per cell and seed) and population training (`advgame.psro`, one unit per best
 response) both go through it. The executor is chosen by name:
 
 - ``"local"`` (the default): this process for ``workers=1``, else a `ProcessPoolExecutor`

@@ -364,11 +364,11 @@ def _rel(path: str | Path, start: Path) -> str:
         return Path(path).resolve().as_posix()
 
 
-# -- the meta-game of a population run (advgame.training.psro) -------------------------------
+# -- the meta-game of a population run (advgame.psro) -------------------------------
 def meta_game_section(meta: Sequence[Mapping[str, Any]]) -> str:
     """Markdown: per iteration, the meta-game matrix with each side's meta-strategy.
 
-    `meta` is `advgame.training.psro.load_meta`'s list. Rows are protagonists, columns
+    `meta` is `advgame.psro.load_meta`'s list. Rows are protagonists, columns
     adversaries; a cell is the protagonist's mean true return; the last column and row give
     the protagonists' and the adversaries' meta-strategy probabilities.
     """

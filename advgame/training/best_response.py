@@ -4,7 +4,7 @@ A `BestResponseJob` is a pure, picklable value; `train_best_response` trains its
 (`advgame.training.learning.Side`, an SB3 model on a `SingleAgentView`) against a
 `MixtureSpec` of the other side's policies and returns the checkpoint *as bytes*, so the job
 can run on any worker of any node (`advgame.evaluation.executor.run_units`) and the driver
-writes the files where the run keeps them. `advgame.training.psro` builds these jobs.
+writes the files where the run keeps them. `advgame.psro` builds these jobs.
 """
 
 from __future__ import annotations
