@@ -135,6 +135,8 @@ class SB3Policy:
         self._ready = False
         self._box: tuple[np.ndarray, np.ndarray] | None = None
         self._squash = False
+        self._head: Any = None
+        self._stats = (obs_mean, obs_var)
 
     @property
     def observation_std(self) -> np.ndarray | None:
@@ -148,24 +150,48 @@ class SB3Policy:
 
             torch.manual_seed(seed)
 
+    @property
+    def batch_key(self) -> tuple | None:
+        """Equal for policies that `act_batch` may serve together (same frozen net and normalizer).
+
+        ``None`` for a sampling policy: its draws come from torch's global generator in call
+        order, which one batched call would reorder.
+        """
+        if not self.deterministic:
+            return None
+        return (id(self.model), id(self._stats[0]), id(self._stats[1]), self.clip_obs)
+
     def act(self, observation: Any) -> Any:
         """The policy's action for one raw observation.
 
         Normalized in the observation's own precision, then cast to float32, exactly as
         `VecNormalize.normalize_obs` and SB3's ``predict`` do.
         """
-        obs = np.asarray(observation)
+        return self._predict(self._normalize(np.asarray(observation))[None])[0]
+
+    def act_batch(self, observations: Any) -> Any:
+        """The actions for a batch of raw observations ``[n, ...]``, row ``i`` exactly `act`'s.
+
+        A deterministic plain actor runs one batch-invariant forward pass
+        (`advgame.training.forward`); otherwise SB3 predicts row by row.
+        """
+        return self._predict(self._normalize(np.asarray(observations)))
+
+    def _normalize(self, obs: np.ndarray) -> np.ndarray:
         if self.mean is not None and self.std is not None:
             obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs)
-        return self._predict(obs.astype(np.float32, copy=False))
+        return obs.astype(np.float32, copy=False)
 
     def _predict(self, obs: np.ndarray) -> Any:
-        """SB3's ``predict`` for one flat observation, without its batching and checks.
+        """SB3's ``predict`` for a batch of normalized observations, without its checks.
 
         Frozen opponents call this every step, so the per-call overhead matters: the network
-        runs under ``no_grad`` in eval mode and a Box action is clipped as SB3 does.
+        runs under ``no_grad`` in eval mode, a deterministic plain actor skips SB3's
+        distribution objects (`ActorForward`), and a Box action is clipped as SB3 does.
         """
         import torch
+
+        from advgame.training.forward import ActorForward
 
         policy = self.model.policy
         if not self._ready:
@@ -173,10 +199,16 @@ class SB3Policy:
             space = self.model.action_space
             self._box = (space.low, space.high) if hasattr(space, "low") else None
             self._squash = bool(getattr(policy, "squash_output", False))
+            self._head = ActorForward.of(policy) if self.deterministic else None
             self._ready = True
-        with torch.no_grad():
-            action = policy._predict(torch.as_tensor(obs[None]), deterministic=self.deterministic)
-        out = action.cpu().numpy()[0]
+        x = torch.as_tensor(obs)
+        if self._head is not None:
+            action = self._head(x)
+        else:
+            with torch.no_grad():
+                rows = [policy._predict(x[i : i + 1], self.deterministic) for i in range(len(x))]
+            action = torch.cat(rows)
+        out = action.cpu().numpy()
         if self._box is not None:
             out = policy.unscale_action(out) if self._squash else np.clip(out, *self._box)
         return out
