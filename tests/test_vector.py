@@ -18,7 +18,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan
 
 import advgame
 from advgame import adversaries as adv
-from advgame.core.vector import VectorView, act_batch
+from advgame.core.policy import act_batch
+from advgame.core.vector import VectorView
 from advgame.core.views import view_factory
 from advgame.errors import ConfigError
 from advgame.training.checkpoint import SB3Checkpoint, SB3Policy
@@ -179,9 +180,57 @@ def _zero(obs: Any) -> np.ndarray:
     return np.zeros(3, dtype=np.float32)
 
 
+def _zero_action(obs: Any) -> np.ndarray:
+    return np.zeros(3, dtype=np.float32)  # the action adversary's no-op in preset "default"
+
+
 def test_checkpoint_views_share_one_network_in_process(checkpoint: SB3Checkpoint) -> None:
     fns = [view_factory("Hopper-v5", "observation_adversary", {"protagonist": checkpoint})] * 2
     venv = VectorView(fns)
     keys = {v.policies["protagonist"].batch_key for v in venv.envs}
     assert len(keys) == 1 and None not in keys
     venv.close()
+
+
+# -- batched evaluation ------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def adversary_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> SB3Checkpoint:
+    """An (untrained, deterministic) PPO observation adversary of preset ``default``."""
+    from stable_baselines3 import PPO
+
+    view = view_factory(
+        "Hopper-v5", "observation_adversary", {"protagonist": _zero}, preset="default"
+    )()
+    path = tmp_path_factory.mktemp("adv") / "observation_adversary.zip"
+    PPO("MlpPolicy", view, seed=1, device="cpu").save(path)
+    return SB3Checkpoint(str(path), "ppo")
+
+
+def test_batched_evaluation_rows_equal_the_per_episode_path(
+    checkpoint: SB3Checkpoint,
+    adversary_checkpoint: SB3Checkpoint,
+    monkeypatch: pytest.MonkeyPatch,
+    one_torch_thread: None,
+) -> None:
+    from advgame.evaluation import AdversarySetup, population_jobs, run_job
+    from advgame.evaluation.batched import play_job_sequential
+
+    protagonists = {"ppo": checkpoint, "zero": _zero}
+    setups = {
+        "nominal": AdversarySetup.nominal(),
+        "gauss": AdversarySetup.from_preset("Hopper-v5", "state-gauss-0.1"),
+        "shift": AdversarySetup.from_preset("Hopper-v5", "shift-uniform"),
+        "learned": AdversarySetup(
+            {"preset": "default"},
+            {"observation_adversary": adversary_checkpoint, "action_adversary": _zero_action},
+        ),
+    }
+    jobs = population_jobs("Hopper-v5", protagonists, setups, seeds=(0, 2, 5), episodes=2)
+    calls: list[int] = []
+    batch = SB3Policy.act_batch
+    monkeypatch.setattr(SB3Policy, "act_batch", lambda s, o: calls.append(len(o)) or batch(s, o))
+    for job in jobs:
+        got, want = run_job(job), play_job_sequential(job)
+        assert len(got) == 6
+        _same(got, want, f"{job.protagonist} vs {job.adversary}")
+    assert max(calls) == 6  # the six episodes of a job asked the network together

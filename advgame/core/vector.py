@@ -25,29 +25,11 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from advgame.core.policy import act_batch
 from advgame.core.views import SingleAgentView
 from advgame.errors import ConfigError
 
-__all__ = ["VectorView", "act_batch"]
-
-
-def act_batch(policies: Sequence[Any], observations: Sequence[Any]) -> Sequence[Any]:
-    """``policies[i].act(observations[i])`` for every ``i``, in one call where the policies allow.
-
-    Policies that expose an equal, non-None ``batch_key`` and an ``act_batch(obs[n, ...])``
-    are served by one `act_batch` call of the first (e.g. N views of one frozen SB3 network);
-    any other policy is asked one observation at a time.
-    """
-    head = policies[0]
-    key = getattr(head, "batch_key", None)
-    if (
-        len(policies) > 1
-        and key is not None
-        and hasattr(head, "act_batch")
-        and all(getattr(p, "batch_key", None) == key for p in policies[1:])
-    ):
-        return head.act_batch(np.stack(observations))
-    return [p.act(o) for p, o in zip(policies, observations, strict=True)]
+__all__ = ["VectorView"]
 
 
 class VectorView(DummyVecEnv):

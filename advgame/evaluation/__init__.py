@@ -35,7 +35,7 @@ import multiprocessing
 import os
 import pickle
 import sys
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
@@ -123,34 +123,16 @@ def _torch_threads(n: int) -> Iterator[None]:
 def run_job(job: EvalJob) -> list[dict[str, Any]]:
     """Play `job`; return one row per episode (`COLUMNS` and the job's tags).
 
-    Policies are built afresh for every seed, so a seed's rows do not depend on the job's
-    other seeds; torch, if imported, runs on one thread meanwhile.
+    All episodes of the job (every seed) are played in lockstep, one game each, with the
+    policies of one agent asked for all games at once (`advgame.evaluation.batched`); every
+    episode is the one a seed plays alone, and policies are built afresh for every episode,
+    so a seed's rows do not depend on the job's other seeds. Torch, if imported, runs on one
+    thread meanwhile.
     """
-    import advgame
-    from advgame.core.episodes import build_policies, rollout
+    from advgame.evaluation.batched import play_job
 
-    game = advgame.make(job.scenario, **job.make_kwargs)
-    prot = job.protagonist_spec
-    specs = {**(prot if isinstance(prot, Mapping) else dict.fromkeys(game.protagonists, prot))}
-    specs.update(job.adversary_specs)
-    head = {"scenario": job.scenario, "protagonist": job.protagonist, "adversary": job.adversary}
-    rows = []
-    try:
-        for seed in job.seeds:
-            try:
-                policies = build_policies(game, specs)
-            except ConfigError as exc:
-                where = f"{job.scenario} made with {job.make_kwargs}"
-                msg = f"Job {job.protagonist!r} vs {job.adversary!r} on {where}: {exc}"
-                raise type(exc)(msg) from None
-            with _torch_threads(1):
-                results = rollout(game, policies, seed=seed * SEED_STRIDE, episodes=job.episodes)
-            for i, r in enumerate(results):
-                res = {**dataclasses.asdict(r), "clipped": int(sum(r.clipped.values()))}
-                rows.append({**head, "seed": seed, "episode": i, **res, **job.tags})
-    finally:
-        game.close()
-    return rows
+    with _torch_threads(1):
+        return play_job(job)
 
 
 def _init_worker(path: list[str]) -> None:
