@@ -80,21 +80,66 @@ def play_job(job: EvalJob) -> list[dict[str, Any]]:
 
     Rows come seed by seed, episode by episode, one per episode (`COLUMNS` and the job's tags).
     """
-    import advgame
-
     episodes = [(seed, i) for seed in job.seeds for i in range(job.episodes)]
-    games = [advgame.make(job.scenario, **job.make_kwargs)]
+    games = _POOL.take(job, len(episodes))
     try:
         specs = _specs(job, games[0].protagonists)
-        policies = [_policies(job, games[0], specs)]
+        policies = [_policies(job, game, specs) for game in games]
         if len(episodes) > 1 and not _independent(games[0], policies[0]):
+            _close(games)
             return play_job_sequential(job)
-        for _ in episodes[1:]:
-            games.append(advgame.make(job.scenario, **job.make_kwargs))
-            policies.append(_policies(job, games[-1], specs))
         seeds = [seed * SEED_STRIDE + i for seed, i in episodes]
         results = rollout_batch(games, policies, seeds)
-    finally:
-        for game in games:
-            game.close()
+    except BaseException:
+        _close(games)
+        raise
+    _POOL.give(job, games)
     return _rows(job, [(s, i, r) for (s, i), r in zip(episodes, results, strict=True)])
+
+
+def _close(games: list[Any]) -> None:
+    for game in games:
+        game.close()
+
+
+class _GamePool:
+    """Games kept between jobs of this process, per scenario and `make` options.
+
+    A job needs one game per episode; making them is a good part of a short job's time, and
+    games are reusable by design: `Game.reset(seed)` restores every nominal parameter and
+    reseeds everything (invariants 4 and 5). Games with a normalized-space observation budget
+    are not kept: their scale is set by the protagonist of the job that played them.
+    """
+
+    KEYS = 8
+
+    def __init__(self) -> None:
+        self._free: dict[str, list[Any]] = {}
+
+    @staticmethod
+    def _key(job: EvalJob) -> str:
+        return f"{job.scenario}|{sorted(job.make_kwargs.items())!r}"
+
+    def take(self, job: EvalJob, n: int) -> list[Any]:
+        """`n` games of `job`'s scenario and options, kept ones first."""
+        import advgame
+
+        free = self._free.pop(self._key(job), [])
+        games = free[:n]
+        _close(free[n:])
+        while len(games) < n:
+            games.append(advgame.make(job.scenario, **job.make_kwargs))
+        return games
+
+    def give(self, job: EvalJob, games: list[Any]) -> None:
+        """Keep `games` for later jobs (or close them: scaled budgets, too many keys)."""
+        scaled = any(
+            getattr(d.spec, "space", "raw") == "normalized" for d in games[0].disruptors.values()
+        )
+        if scaled or (len(self._free) >= self.KEYS and self._key(job) not in self._free):
+            _close(games)
+            return
+        self._free[self._key(job)] = games
+
+
+_POOL = _GamePool()

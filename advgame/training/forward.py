@@ -18,12 +18,14 @@ back to SB3's own ``_predict``, one row at a time.
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 __all__ = ["ActorForward", "actor_head"]
 
 _ELEMENTWISE = ("Tanh", "ReLU", "ELU", "LeakyReLU", "Sigmoid", "SiLU", "GELU", "Identity")
 _PROBE_SIZES = (2, 3, 5, 8, 16, 33)
+_CACHE: weakref.WeakKeyDictionary[Any, ActorForward | None] = weakref.WeakKeyDictionary()
 
 
 class _Unsupported(Exception):
@@ -79,14 +81,19 @@ class ActorForward:
 
     @classmethod
     def of(cls, policy: Any) -> ActorForward | None:
-        """The forward pass of `policy`'s actor, or None if its layers are not covered."""
+        """The forward pass of `policy`'s actor, or None if its layers are not covered.
+
+        Cached per policy module (the probes run once per loaded network, not per build).
+        """
+        if policy in _CACHE:
+            return _CACHE[policy]
         head = actor_head(policy)
-        if head is None:
-            return None
         try:
-            return cls(*head)
+            out = None if head is None else cls(*head)
         except _Unsupported:
-            return None
+            out = None
+        _CACHE[policy] = out
+        return out
 
     def _modules(self) -> list[Any]:
         out: list[Any] = []
@@ -103,15 +110,16 @@ class ActorForward:
         """Deterministic actions for the batch `obs` (before SB3's clipping or unscaling)."""
         import torch
 
-        x = obs.flatten(1)  # the flatten feature extractor
+        x, n = obs.flatten(1), obs.shape[0]  # the flatten feature extractor
         with torch.no_grad():
             for layer in self._layers:
-                if len(x) > 1 and self._batched.get(id(layer)) is True:
-                    x = _batched_linear(layer, x)
-                elif len(x) > 1 and id(layer) in self._batched:
-                    x = torch.cat([layer(x[i : i + 1]) for i in range(len(x))])
-                else:
+                batched = self._batched.get(id(layer)) if n > 1 else None
+                if batched is None:  # one row, or an element-wise layer
                     x = layer(x)
+                elif batched:
+                    x = _batched_linear(layer, x)
+                else:
+                    x = torch.cat([layer(x[i : i + 1]) for i in range(n)])
         if self.kind == "tanh":
             return torch.tanh(x)
         if self.kind == "argmax":
