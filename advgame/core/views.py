@@ -167,8 +167,11 @@ class SingleAgentView(gym.Env):
 
     def _others(self) -> dict[str, Any]:
         """The embedded policies' actions for the next move."""
+        players = self._players_now()
+        if not players:  # e.g. a protagonist's act move against sense-time adversaries only
+            return {}
         observe = self.game.observe
-        return {a: policy.act(observe(a)) for a, policy in self._players_now()}
+        return {a: policy.act(observe(a)) for a, policy in players}
 
     def set_policies(self, policies: Mapping[str, Any]) -> None:
         """Swap some embedded policies (the training loop does this between phases).
