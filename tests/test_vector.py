@@ -14,6 +14,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan
 
 import advgame
@@ -77,8 +78,6 @@ def test_protagonist_views_in_lockstep_play_the_single_views_episodes() -> None:
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory: pytest.TempPathFactory) -> SB3Checkpoint:
     """An (untrained, deterministic) PPO Hopper protagonist saved as a checkpoint."""
-    from stable_baselines3 import PPO
-
     path = tmp_path_factory.mktemp("ppo") / "protagonist.zip"
     PPO("MlpPolicy", gym.make("Hopper-v5"), seed=0, device="cpu").save(path)
     return SB3Checkpoint(str(path), "ppo")
@@ -119,7 +118,31 @@ def test_a_batched_forward_pass_gives_each_row_the_single_row_action(algo: str) 
     norm = np.clip((obs[0] - policy.mean) / policy.std, -10, 10).astype(np.float32)
     np.testing.assert_array_equal(rows[0], model.predict(norm, deterministic=True)[0])
     assert policy.batch_key is not None
-    assert SB3Policy(model, deterministic=False).batch_key is None  # samples: never batched
+    sampling = SB3Policy(model, deterministic=False).batch_key
+    # only a PPO Gaussian samples in batches (the training loop's frozen opponents)
+    assert (sampling is not None) == (algo == "ppo") and sampling != policy.batch_key
+
+
+def test_a_sampling_ppo_policy_draws_a_batch_from_its_own_distribution(
+    one_torch_thread: None,
+) -> None:
+    import torch
+
+    model = PPO("MlpPolicy", gym.make("Hopper-v5"), seed=0, device="cpu")
+    policy = SB3Policy(model, deterministic=False)
+    obs = np.random.default_rng(0).normal(size=11)
+    torch.manual_seed(0)
+    batch = policy.act_batch(np.tile(obs, (4000, 1)))
+    one_by_one = np.stack([policy.act(obs) for _ in range(4000)])
+    for seed in range(3):  # one row is SB3's own sample, draw for draw
+        torch.manual_seed(seed)
+        mine = policy.act(obs)
+        torch.manual_seed(seed)
+        np.testing.assert_array_equal(mine, model.predict(obs.astype(np.float32))[0])
+    assert batch.shape == one_by_one.shape and np.unique(batch[:, 0]).size > 1000
+    assert np.abs(batch).max() <= 1.0  # clipped into the action box as SB3 does
+    np.testing.assert_allclose(batch.mean(0), one_by_one.mean(0), atol=0.06)
+    np.testing.assert_allclose(batch.std(0), one_by_one.std(0), atol=0.06)
 
 
 def test_act_batch_asks_policies_without_a_common_key_one_by_one() -> None:
@@ -137,8 +160,6 @@ def test_act_batch_asks_policies_without_a_common_key_one_by_one() -> None:
 
 
 def test_sb3_wrappers_and_ppo_learn_on_vector_views_of_both_sides(one_torch_thread: None) -> None:
-    from stable_baselines3 import PPO
-
     from advgame.agents import PPOConfig
     from advgame.training.learning import EpisodeStats, Side
 
@@ -196,8 +217,6 @@ def test_checkpoint_views_share_one_network_in_process(checkpoint: SB3Checkpoint
 @pytest.fixture(scope="module")
 def adversary_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> SB3Checkpoint:
     """An (untrained, deterministic) PPO observation adversary of preset ``default``."""
-    from stable_baselines3 import PPO
-
     view = view_factory(
         "Hopper-v5", "observation_adversary", {"protagonist": _zero}, preset="default"
     )()

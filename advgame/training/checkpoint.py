@@ -136,6 +136,7 @@ class SB3Policy:
         self._box: tuple[np.ndarray, np.ndarray] | None = None
         self._squash = False
         self._head: Any = None
+        self._sampler: Any = None
         self._stats = (obs_mean, obs_var)
 
     @property
@@ -154,12 +155,13 @@ class SB3Policy:
     def batch_key(self) -> tuple | None:
         """Equal for policies that `act_batch` may serve together (same frozen net and normalizer).
 
-        ``None`` for a sampling policy: its draws come from torch's global generator in call
-        order, which one batched call would reorder.
+        ``None`` for a sampling policy other than a PPO Gaussian (see `act_batch`).
         """
-        if not self.deterministic:
+        self._prepare()
+        if not self.deterministic and self._sampler is None:
             return None
-        return (id(self.model), id(self._stats[0]), id(self._stats[1]), self.clip_obs)
+        stats = (id(self._stats[0]), id(self._stats[1]), self.clip_obs)
+        return (id(self.model), *stats, self.deterministic)
 
     def act(self, observation: Any) -> Any:
         """The policy's action for one raw observation.
@@ -170,10 +172,13 @@ class SB3Policy:
         return self._predict(self._normalize(np.asarray(observation))[None])[0]
 
     def act_batch(self, observations: Any) -> Any:
-        """The actions for a batch of raw observations ``[n, ...]``, row ``i`` exactly `act`'s.
+        """The actions for a batch of raw observations ``[n, ...]``.
 
-        A deterministic plain actor runs one batch-invariant forward pass
-        (`advgame.training.forward`); otherwise SB3 predicts row by row.
+        Deterministic: row ``i`` is exactly `act`'s, from one batch-invariant forward pass
+        (`advgame.training.forward`) where the actor is a plain one, else row by row. Sampling
+        (a PPO Gaussian, as the training loop's frozen opponents act): one forward pass and one
+        draw of ``[n, action]`` normals from torch's generator: the same distribution as `act`,
+        not the same draws as n calls of it (torch fills a long tensor with another algorithm).
         """
         return self._predict(self._normalize(np.asarray(observations)))
 
@@ -182,28 +187,42 @@ class SB3Policy:
             obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs)
         return obs.astype(np.float32, copy=False)
 
+    def _prepare(self) -> None:
+        """Once: eval mode, the action box, and the lean forward pass (`ActorForward`)."""
+        if self._ready:
+            return
+        from advgame.training.forward import ActorForward
+
+        policy = self.model.policy
+        policy.set_training_mode(False)
+        space = self.model.action_space
+        self._box = (space.low, space.high) if hasattr(space, "low") else None
+        self._squash = bool(getattr(policy, "squash_output", False))
+        forward = ActorForward.of(policy)
+        self._head = forward if self.deterministic else None
+        gaussian = forward is not None and forward.kind == "mean" and hasattr(policy, "log_std")
+        self._sampler = forward if gaussian and hasattr(policy, "mlp_extractor") else None
+        self._ready = True
+
     def _predict(self, obs: np.ndarray) -> Any:
         """SB3's ``predict`` for a batch of normalized observations, without its checks.
 
         Frozen opponents call this every step, so the per-call overhead matters: the network
-        runs under ``no_grad`` in eval mode, a deterministic plain actor skips SB3's
-        distribution objects (`ActorForward`), and a Box action is clipped as SB3 does.
+        runs under ``no_grad`` in eval mode, a plain actor skips SB3's distribution objects
+        (`ActorForward`; a PPO Gaussian samples ``mean + std * randn`` as SB3's ``rsample``
+        does, bit for bit for one row), and a Box action is clipped as SB3 does.
         """
         import torch
 
-        from advgame.training.forward import ActorForward
-
+        self._prepare()
         policy = self.model.policy
-        if not self._ready:
-            policy.set_training_mode(False)
-            space = self.model.action_space
-            self._box = (space.low, space.high) if hasattr(space, "low") else None
-            self._squash = bool(getattr(policy, "squash_output", False))
-            self._head = ActorForward.of(policy) if self.deterministic else None
-            self._ready = True
         x = torch.as_tensor(obs)
         if self._head is not None:
             action = self._head(x)
+        elif self._sampler is not None:  # SB3's Gaussian sample, the same draws for one row
+            with torch.no_grad():
+                mean = self._sampler(x)
+                action = mean + torch.randn(mean.shape) * policy.log_std.exp()
         else:
             with torch.no_grad():
                 rows = [policy._predict(x[i : i + 1], self.deterministic) for i in range(len(x))]
