@@ -13,7 +13,7 @@ hyper-parameters (`advgame.agents.PPOConfig`: 2048 steps per rollout, 10 epochs,
 
 Each is timed end to end (model/side construction included) in ``--rounds`` interleaved
 rounds (plain, loop, plain, loop, ...) so machine noise hits both alike; the best round of
-each is reported in environment steps per second of wall-clock time, with the ratio
+each (and the median of the per-round ratios) is reported in environment steps per second of wall-clock time, with the ratio
 loop / plain (goal >= 0.95), at each ``--n-envs`` (default 1 and 8: the loop's views run in a
 `VectorView`, the frozen adversary called once per step for all views; plain SB3 runs a
 `DummyVecEnv` of as many envs; each phase is one PPO rollout of all views, so at 8 envs give
@@ -33,6 +33,7 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 import torch
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
@@ -128,6 +129,9 @@ def compare(steps: int, rounds: int, seed: int, n_envs: int) -> None:
         f"  (goal >= {GOAL})"
     )
     print(f"  loop training phases only    : {max(phases):10.0f}  (progress.csv wall_s)")
+    ratios = [(wl / wp, cl / cp) for (wp, cp), (wl, cl) in zip(plain, loop, strict=True)]
+    wall_r, cpu_r = np.median(ratios, axis=0)
+    print(f"  median per-round ratio       : {wall_r:10.2f} {cpu_r:13.2f}")
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ def _same(a: Any, b: Any, where: str) -> None:
         assert a.keys() == b.keys(), where
         for k in a:
             _same(a[k], b[k], f"{where}[{k!r}]")
-    elif isinstance(a, list | tuple):
+    elif isinstance(a, list | tuple) or (isinstance(a, np.ndarray) and a.dtype == object):
         assert len(a) == len(b), where
         for i, (x, y) in enumerate(zip(a, b, strict=True)):
             _same(x, y, f"{where}[{i}]")
@@ -81,6 +81,27 @@ def checkpoint(tmp_path_factory: pytest.TempPathFactory) -> SB3Checkpoint:
     path = tmp_path_factory.mktemp("ppo") / "protagonist.zip"
     PPO("MlpPolicy", gym.make("Hopper-v5"), seed=0, device="cpu").save(path)
     return SB3Checkpoint(str(path), "ppo")
+
+
+def test_the_gymnasium_face_plays_what_sync_vector_env_plays_with_the_same_views() -> None:
+    from gymnasium.vector import SyncVectorEnv
+
+    from advgame.core.vector import GymVectorView
+
+    noise = {"observation_adversary": adv.GaussianAdversary(std=0.1)}
+    fns = [view_factory("Hopper-v5", "protagonist", noise, preset="state-gauss-0.1")] * N
+    mine, ref = GymVectorView(fns), SyncVectorEnv(fns, autoreset_mode="SameStep")
+    _same(mine.reset(seed=7), ref.reset(seed=7), "reset")
+    rng, finals = np.random.default_rng(0), 0
+    for t in range(80):
+        actions = rng.uniform(-1, 1, size=(N, 3)).astype(np.float32)
+        got, want = mine.step(actions), ref.step(actions)
+        for name, x, y in zip(("obs", "reward", "term", "trunc", "infos"), got, want, strict=True):
+            _same(x, y, f"step {t} {name}")
+        finals += int(got[2].sum())
+    assert finals >= N  # episodes ended and were reset in the same step
+    mine.close()
+    ref.close()
 
 
 def test_adversary_views_batch_the_frozen_protagonist_and_count_clips_per_view(
