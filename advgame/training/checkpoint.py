@@ -155,11 +155,12 @@ class SB3Policy:
     def batch_key(self) -> tuple | None:
         """Equal for policies that `act_batch` may serve together (same frozen net and normalizer).
 
-        ``None`` for a sampling policy other than a PPO Gaussian (see `act_batch`).
+        ``None`` where `act_batch` could only go row by row: an actor `ActorForward` does not
+        cover, or a sampling policy other than a PPO Gaussian.
         """
         self._prepare()
-        if not self.deterministic and self._sampler is None:
-            return None
+        if (self._head if self.deterministic else self._sampler) is None:
+            return None  # no lean forward pass (or a sampling non-PPO policy): act row by row
         stats = (id(self._stats[0]), id(self._stats[1]), self.clip_obs)
         return (id(self.model), *stats, self.deterministic)
 
