@@ -42,6 +42,7 @@ _LAZY = {
     "PolicySpec": "advgame.core.policy",
     "SingleAgentView": "advgame.core.views",
     "view_factory": "advgame.core.views",
+    "VectorView": "advgame.core.vector",
     "rollout": "advgame.core.episodes",
     "EpisodeResult": "advgame.core.episodes",
     "AdvgameError": "advgame.errors",
@@ -62,6 +63,7 @@ if TYPE_CHECKING:
         scenario_spec,
     )
     from advgame.core.schedule import Schedule
+    from advgame.core.vector import VectorView
     from advgame.core.views import SingleAgentView, view_factory
     from advgame.disruptors import (
         ActionDisruptor,

@@ -11,8 +11,15 @@ Four ways of stepping HalfCheetah-v5 with uniformly random actions (drawn before
 * ``parallel``: the full PettingZoo `Game.step` of preset ``default`` (bounded observation and
   action adversaries), random actions for all three agents, two moves per step.
 
-Each env is built once and stepped in many short segments (``--chunk`` steps), interleaved
-raw, wrapper, view, parallel, raw, ... for ``--rounds`` rounds; episodes run on across segments.
+And, vectorised (``--n`` envs, default 8), per env step:
+
+* ``sync``: Gymnasium's ``SyncVectorEnv`` of ``n`` raw ``gymnasium.make("HalfCheetah-v5")``.
+* ``vector``: `advgame.core.vector.VectorView` of ``n`` protagonist views as ``view`` above
+  (an SB3 `VecEnv`; autoreset as `DummyVecEnv`).
+
+Each env is built once and stepped in many short segments (``--chunk`` env steps), interleaved
+raw, wrapper, view, parallel, sync, vector, raw, ... for ``--rounds`` rounds; episodes run on
+across segments. The vectorised pair is compared with each other (``vector`` / ``sync``).
 On a shared or virtualised machine the speed of the whole machine drifts by tens of percent
 within seconds, so each segment is compared with the raw segment just before it: reported are
 the quartiles of those per-round ratios and the median extra time per step in µs.
@@ -36,7 +43,7 @@ from advgame.adversaries import GaussianAdversary
 from advgame.core.views import SingleAgentView
 
 ENV = "HalfCheetah-v5"
-GOALS = {"view": 0.95, "parallel": 0.90}
+GOALS = {"view": 0.90, "parallel": 0.80, "vector": 0.95}
 
 
 class _NoiseWrapper(gym.ObservationWrapper):
@@ -78,8 +85,36 @@ def _parallel_runner(adv_obs: np.ndarray, adv_act: np.ndarray) -> Callable[[np.n
     return run
 
 
-def runners(chunk: int, rng: np.random.Generator) -> dict[str, Callable[[np.ndarray], float]]:
-    """The four stepping loops, each timing one segment of `chunk` protagonist steps."""
+def _vector_runners(n: int) -> dict[str, Callable[[np.ndarray], float]]:
+    """``sync`` and ``vector``: each steps `n` envs with ``actions[k : k + n]`` per step."""
+    from advgame.core.vector import VectorView
+    from advgame.core.views import view_factory
+
+    sync = gym.vector.SyncVectorEnv([functools.partial(gym.make, ENV) for _ in range(n)])
+    sync.reset(seed=0)
+    noise = {"observation_adversary": GaussianAdversary(std=0.1)}
+    fns = [view_factory(ENV, "protagonist", noise, preset="state-gauss-0.1") for _ in range(n)]
+    vector = VectorView(fns)
+    vector.seed(0)
+    vector.reset()
+
+    def run(env_step: Callable[[np.ndarray], Any], actions: np.ndarray) -> float:
+        batches = actions[: len(actions) // n * n].reshape(-1, n, actions.shape[1])
+        start = time.perf_counter()
+        for batch in batches:
+            env_step(batch)
+        return time.perf_counter() - start
+
+    return {
+        "sync": functools.partial(run, sync.step),
+        "vector": functools.partial(run, vector.step),
+    }
+
+
+def runners(
+    chunk: int, rng: np.random.Generator, n: int = 8
+) -> dict[str, Callable[[np.ndarray], float]]:
+    """The stepping loops, each timing one segment of `chunk` (env) steps."""
     view = SingleAgentView(
         advgame.make(ENV, preset="state-gauss-0.1"),
         "protagonist",
@@ -92,17 +127,19 @@ def runners(chunk: int, rng: np.random.Generator) -> dict[str, Callable[[np.ndar
         "wrapper": _gym_runner(_NoiseWrapper(gym.make(ENV))),
         "view": _gym_runner(view),
         "parallel": _parallel_runner(adv_obs, adv_act),
+        **_vector_runners(n),
     }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=100)
-    parser.add_argument("--chunk", type=int, default=1000, help="protagonist steps per segment")
+    parser.add_argument("--chunk", type=int, default=1000, help="env steps per segment")
+    parser.add_argument("--n", type=int, default=8, help="envs of the vectorised pair")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     actions = rng.uniform(-1, 1, (args.chunk, 6)).astype(np.float32)
-    loops = runners(args.chunk, rng)
+    loops = runners(args.chunk, rng, args.n)
     seconds: dict[str, list[float]] = {k: [] for k in loops}
     for r in range(args.rounds):
         for key, run in loops.items():
@@ -123,16 +160,19 @@ def report(seconds: dict[str, list[float]], chunk: int) -> dict[str, Any]:
     print(
         f"  {'':38s} {'ratio to raw: q25':>17s} {'median':>7s} {'q75':>6s}  {'extra µs/step':>13s}"
     )
+    sync = np.asarray(seconds["sync"])
+    print(f"  (SyncVectorEnv of raw envs: median {np.median(chunk / sync):,.0f} env steps/s)")
     out: dict[str, Any] = {}
     labels = {
         "wrapper": "plain gym wrapper + N(0,0.1) (reference)",
         "view": "protagonist view + N(0,0.1)",
         "parallel": "ParallelEnv, obs+act advs",
     }
+    labels["vector"] = "VectorView + N(0,0.1), vs SyncVectorEnv"
     for key, label in labels.items():
-        t = np.asarray(seconds[key])
-        q25, med, q75 = np.percentile(raw / t, [25, 50, 75])
-        extra = float(np.median((t - raw) / chunk)) * 1e6
+        t, base = np.asarray(seconds[key]), raw if key != "vector" else np.asarray(seconds["sync"])
+        q25, med, q75 = np.percentile(base / t, [25, 50, 75])
+        extra = float(np.median((t - base) / chunk)) * 1e6
         goal = f"  (goal >= {GOALS[key]})" if key in GOALS else ""
         print(f"  {label:40s} {q25:15.3f} {med:7.3f} {q75:6.3f}  {extra:13.1f}{goal}")
         out[key] = {"median": float(med), "q25": float(q25), "q75": float(q75), "extra_us": extra}

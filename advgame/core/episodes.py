@@ -7,20 +7,27 @@ their observed return, and each adversary's clip count.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
 
-from advgame.core.policy import ConstantPolicy, Policy, as_policy
+from advgame.core.policy import ConstantPolicy, Policy, act_batch, as_policy
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:
     from advgame.core.game import Game
 
-__all__ = ["EpisodeResult", "build_policies", "filler_action", "reseed_policies", "rollout"]
+__all__ = [
+    "EpisodeResult",
+    "build_policies",
+    "filler_action",
+    "reseed_policies",
+    "rollout",
+    "rollout_batch",
+]
 
 
 @dataclass
@@ -113,27 +120,70 @@ def rollout(
     means the same at evaluation as in training.
     """
     pols = build_policies(game, policies)
-    for agent in game.protagonists:
-        std = getattr(pols[agent], "observation_std", None)
-        if std is not None:
-            game.set_observation_scale(agent, std)
     results = []
     for i in range(episodes):
         ep_seed = None if seed is None else seed + i
-        reseed_policies(pols, ep_seed)
-        game.reset(seed=ep_seed)
-        res = EpisodeResult(clipped=dict.fromkeys(game.adversaries, 0))
-        first = game.protagonists[0]
-        while game.agents:
-            move = game.play({a: pols[a].act(game.observe(a)) for a in game.next_movers})
-            for a, n in move.clipped.items():
-                res.clipped[a] += n
-            if move.rewards is not None:
-                res.true_return += move.reward
-                res.cost += move.cost
-                res.payoff += move.payoff
-                res.observed_return += move.rewards[first]
-                res.length += 1
-                res.terminated = move.terminated
-        results.append(res)
+        results += rollout_batch([game], [pols], [ep_seed])
     return results
+
+
+def rollout_batch(
+    games: Sequence[Game], policies: Sequence[Mapping[str, Policy]], seeds: Sequence[int | None]
+) -> list[EpisodeResult]:
+    """Play one episode in each of `games` in lockstep, each the one `rollout` plays alone.
+
+    Game ``k`` plays ``policies[k]`` and resets with ``seeds[k]``. `policies` are built policies (`build_policies`), one dict per game, reseeded here. Before
+    each move, the policies of every game in which agent ``a`` moves are asked at once
+    (`act_batch`: one forward pass for the copies of a frozen network). Random policies must
+    keep their randomness to themselves (noise adversaries do); a policy drawing from a global
+    generator (a sampling SB3 policy) would see its draws interleaved across games.
+    """
+    for game, pols in zip(games, policies, strict=True):
+        for agent in game.protagonists:
+            std = getattr(pols[agent], "observation_std", None)
+            if std is not None:
+                game.set_observation_scale(agent, std)
+    results = []
+    for game, pols, seed in zip(games, policies, seeds, strict=True):
+        reseed_policies(pols, seed)
+        game.reset(seed=seed)
+        results.append(EpisodeResult(clipped=dict.fromkeys(game.adversaries, 0)))
+    live = [k for k, game in enumerate(games) if game.agents]
+    while live:
+        actions = _batched_actions([games[k] for k in live], [policies[k] for k in live])
+        for k, acts in zip(live, actions, strict=True):
+            _record(results[k], games[k].play(acts), games[k].protagonists[0])
+        live = [k for k in live if games[k].agents]
+    return results
+
+
+def _batched_actions(
+    games: Sequence[Game], policies: Sequence[Mapping[str, Policy]]
+) -> list[dict[str, Any]]:
+    """Each game's actions for its next move, the policies of one agent asked together."""
+    if len(games) == 1:  # one game: no grouping to do
+        game, pols = games[0], policies[0]
+        return [{a: pols[a].act(game.observe(a)) for a in game.next_movers}]
+    groups: dict[str, list[tuple[int, Policy, Any]]] = {}
+    for k, (game, pols) in enumerate(zip(games, policies, strict=True)):
+        for a in game.next_movers:
+            groups.setdefault(a, []).append((k, pols[a], game.observe(a)))
+    out: list[dict[str, Any]] = [{} for _ in games]
+    for a, rows in groups.items():
+        acts = act_batch([r[1] for r in rows], [r[2] for r in rows])
+        for (k, _, _), action in zip(rows, acts, strict=True):
+            out[k][a] = action
+    return out
+
+
+def _record(res: EpisodeResult, move: Any, first: str) -> None:
+    """Add what one move measured to the episode's result."""
+    for a, n in move.clipped.items():
+        res.clipped[a] += n
+    if move.rewards is not None:
+        res.true_return += move.reward
+        res.cost += move.cost
+        res.payoff += move.payoff
+        res.observed_return += move.rewards[first]
+        res.length += 1
+        res.terminated = move.terminated

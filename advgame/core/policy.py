@@ -9,7 +9,7 @@ presets, populations and worker processes pass around.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
@@ -28,6 +28,7 @@ __all__ = [
     "Policy",
     "PolicySpec",
     "WhiteBox",
+    "act_batch",
     "as_policy",
 ]
 
@@ -41,6 +42,11 @@ class Policy(Protocol):
 
     def act(self, observation: Any) -> Any:
         """The action for `observation`."""
+
+
+# A policy may also offer ``act_batch(observations[n, ...]) -> actions[n, ...]`` with a
+# ``batch_key`` property: policies with equal non-None keys (e.g. N views' copies of one frozen
+# network) are then served by one `act_batch` call (see `act_batch` below). Both are optional.
 
 
 @runtime_checkable
@@ -152,3 +158,22 @@ def as_policy(obj: Any, info: AgentInfo) -> Policy:
         f"Cannot use {obj!r} as the policy of {info.agent!r}: expected a Policy (reset/act), "
         "a PolicySpec (build) or a callable observation -> action."
     )
+
+
+def act_batch(policies: Sequence[Any], observations: Sequence[Any]) -> Sequence[Any]:
+    """``policies[i].act(observations[i])`` for every ``i``, in one call where the policies allow.
+
+    Policies that expose an equal, non-None ``batch_key`` and an ``act_batch(obs[n, ...])``
+    are served by one `act_batch` call of the first (e.g. N views of one frozen SB3 network);
+    any other policy is asked one observation at a time.
+    """
+    head = policies[0]
+    key = getattr(head, "batch_key", None)
+    if (
+        len(policies) > 1
+        and key is not None
+        and hasattr(head, "act_batch")
+        and all(getattr(p, "batch_key", None) == key for p in policies[1:])
+    ):
+        return head.act_batch(np.stack(observations))
+    return [p.act(o) for p, o in zip(policies, observations, strict=True)]

@@ -90,49 +90,56 @@ class SingleAgentView(gym.Env):
         raise ConfigError(f"{self.agent!r} got no decision in 100 episodes; check its schedule.")
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
-        """One decision of the learner, then the moves until its next one (or the episode end)."""
+        """One decision of the learner, then the moves until its next one (or the episode end).
+
+        `advgame.core.vector.VectorView` runs the same three phases (`_decide`, `_between`,
+        `_finish`) over N views in lockstep, batching the embedded policies' calls.
+        """
+        tally = self._decide(action, self._others())
+        while self._waiting():
+            self._between(self._others(), tally)
+        return self._finish(tally)
+
+    def _waiting(self) -> bool:
+        """Whether the game has moves to play before the learner's next decision."""
+        game = self.game
+        return bool(game.agents) and self.agent not in game.next_movers
+
+    def _decide(self, action: Any, others: dict[str, Any]) -> _Tally:
+        """The learner's move; `others` holds the embedded policies' actions for it (`_players`)."""
+        others[self.agent] = action
+        if not self._protagonist:
+            tally = _Tally()
+            self._play(others, tally)
+            return tally
+        # A protagonist's decision is one act move, and every move before its next decision is
+        # a sense move, which adds nothing to its reward or info: nothing to sum here.
+        move = self.game.play(others)  # checks the learner's action is there, once per decision
+        assert move.rewards is not None and move.costs is not None and move.info is not None
+        info = dict(move.info)
+        get = info.get  # the task's info may hold these keys; `_play` adds to them
+        info["cost"] = get("cost", 0.0) + move.costs[self.agent]
+        info["true_reward"] = get("true_reward", 0.0) + move.reward
+        info["true_cost"] = get("true_cost", 0.0) + move.cost
+        info["payoff"] = get("payoff", 0.0) + move.payoff
+        return _Tally(0.0 + move.rewards[self.agent], move.terminated, move.truncated, info)
+
+    def _between(self, others: dict[str, Any], tally: _Tally) -> None:
+        """One move between the learner's decisions (`_waiting`), with the others' actions."""
         if self._protagonist:
-            return self._protagonist_step(action)
-        actions = self._others()
-        actions[self.agent] = action
-        tally = _Tally()
-        self._play(actions, tally)
-        while self.game.agents and self.agent not in self.game.next_movers:
-            self._play(self._others(), tally)
+            sensed = self.game._sense(others)  # only sense moves: all actions built here
+            assert sensed.rewards is None, "only sense moves come between protagonist decisions"
+        else:
+            self._play(others, tally)
+
+    def _finish(self, tally: _Tally) -> tuple[Any, float, bool, bool, dict]:
+        """The step's return once the learner is to decide again (or the episode ended)."""
         if tally.truncated and self._schedule is not None and self._schedule.exhausted(self.game.t):
             # The learner had no decision left when the time limit hit: for it the episode
             # ended with its last decision, so bootstrapping past the limit would be wrong.
             tally.terminated, tally.truncated = True, False
-        return (
-            self.game.observe(self.agent),
-            tally.reward,
-            tally.terminated,
-            tally.truncated,
-            tally.info,
-        )
-
-    def _protagonist_step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
-        """`step` of a protagonist, leaner: what `_play` would tally, with nothing to sum.
-
-        A protagonist's decision is one act move, and every move before its next decision is
-        a sense move, which adds nothing to its reward or info.
-        """
-        game, agent = self.game, self.agent
-        actions = self._others()
-        actions[agent] = action
-        move = game.play(actions)  # checks the learner's action is there, once per decision
-        assert move.rewards is not None and move.costs is not None and move.info is not None
-        info = dict(move.info)
-        get = info.get  # the task's info may hold these keys; `_play` adds to them
-        info["cost"] = get("cost", 0.0) + move.costs[agent]
-        info["true_reward"] = get("true_reward", 0.0) + move.reward
-        info["true_cost"] = get("true_cost", 0.0) + move.cost
-        info["payoff"] = get("payoff", 0.0) + move.payoff
-        while game.agents and agent not in game.next_movers:
-            sensed = game._sense(self._others())  # only sense moves: all actions built here
-            assert sensed.rewards is None, "only sense moves come between protagonist decisions"
-        reward = 0.0 + move.rewards[agent]
-        return game.observe(agent), reward, move.terminated, move.truncated, info
+        obs = self.game.observe(self.agent)
+        return obs, tally.reward, tally.terminated, tally.truncated, tally.info
 
     def _play(self, actions: dict[str, Any], tally: _Tally) -> None:
         move = self.game.play(actions)
@@ -156,18 +163,22 @@ class SingleAgentView(gym.Env):
             info[key] = info.get(key, 0.0) + value
         tally.terminated, tally.truncated = move.terminated, move.truncated
 
-    def _others(self) -> dict[str, Any]:
-        """The embedded policies' actions for the next move (`Game.next_movers` but the learner)."""
-        game = self.game
-        movers = game.next_movers
+    def _players_now(self) -> list[tuple[str, Any]]:
+        """The embedded (agent, policy) pairs of the next move: `Game.next_movers` but the learner."""
+        movers = self.game.next_movers
         players = self._players.get(movers)
         if players is None:  # a few distinct mover sets per game: cache each one's policies
             players = [(a, self.policies[a]) for a in movers if a != self.agent]
             self._players[movers] = players
-        out = {}
-        for a, policy in players:
-            out[a] = policy.act(game.observe(a))
-        return out
+        return players
+
+    def _others(self) -> dict[str, Any]:
+        """The embedded policies' actions for the next move."""
+        players = self._players_now()
+        if not players:  # e.g. a protagonist's act move against sense-time adversaries only
+            return {}
+        observe = self.game.observe
+        return {a: policy.act(observe(a)) for a, policy in players}
 
     def set_policies(self, policies: Mapping[str, Any]) -> None:
         """Swap some embedded policies (the training loop does this between phases).
@@ -202,11 +213,17 @@ class _Tally:
 
     __slots__ = ("info", "reward", "terminated", "truncated")
 
-    def __init__(self) -> None:
-        self.reward = 0.0
-        self.terminated = False
-        self.truncated = False
-        self.info: dict[str, Any] = {}
+    def __init__(
+        self,
+        reward: float = 0.0,
+        terminated: bool = False,
+        truncated: bool = False,
+        info: dict[str, Any] | None = None,
+    ) -> None:
+        self.reward = reward
+        self.terminated = terminated
+        self.truncated = truncated
+        self.info: dict[str, Any] = {} if info is None else info
 
 
 class _Placeholder:

@@ -47,6 +47,7 @@ from advgame.evaluation.jobs import (
     population_jobs,
     shift_grid,
     split_seeds,
+    unit_size,
 )
 from advgame.evaluation.payoff import (
     COLUMNS,
@@ -89,6 +90,7 @@ __all__ = [
     "shift_grid",
     "split_seeds",
     "team_protagonist",
+    "unit_size",
     "use_executor",
     "worst_case",
 ]
@@ -122,34 +124,16 @@ def _torch_threads(n: int) -> Iterator[None]:
 def run_job(job: EvalJob) -> list[dict[str, Any]]:
     """Play `job`; return one row per episode (`COLUMNS` and the job's tags).
 
-    Policies are built afresh for every seed, so a seed's rows do not depend on the job's
-    other seeds; torch, if imported, runs on one thread meanwhile.
+    All episodes of the job (every seed) are played in lockstep, one game each, with the
+    policies of one agent asked for all games at once (`advgame.evaluation.batched`); every
+    episode is the one a seed plays alone, and policies are built afresh for every episode,
+    so a seed's rows do not depend on the job's other seeds. Torch, if imported, runs on one
+    thread meanwhile.
     """
-    import advgame
-    from advgame.core.episodes import build_policies, rollout
+    from advgame.evaluation.batched import play_job
 
-    game = advgame.make(job.scenario, **job.make_kwargs)
-    prot = job.protagonist_spec
-    specs = {**(prot if isinstance(prot, Mapping) else dict.fromkeys(game.protagonists, prot))}
-    specs.update(job.adversary_specs)
-    head = {"scenario": job.scenario, "protagonist": job.protagonist, "adversary": job.adversary}
-    rows = []
-    try:
-        for seed in job.seeds:
-            try:
-                policies = build_policies(game, specs)
-            except ConfigError as exc:
-                where = f"{job.scenario} made with {job.make_kwargs}"
-                msg = f"Job {job.protagonist!r} vs {job.adversary!r} on {where}: {exc}"
-                raise type(exc)(msg) from None
-            with _torch_threads(1):
-                results = rollout(game, policies, seed=seed * SEED_STRIDE, episodes=job.episodes)
-            for i, r in enumerate(results):
-                res = {**dataclasses.asdict(r), "clipped": int(sum(r.clipped.values()))}
-                rows.append({**head, "seed": seed, "episode": i, **res, **job.tags})
-    finally:
-        game.close()
-    return rows
+    with _torch_threads(1):
+        return play_job(job)
 
 
 class _Clocked:
@@ -225,10 +209,12 @@ def evaluate(
 ) -> PayoffTable:
     """Run `jobs`; return their rows, in job order (whatever the workers), as a `PayoffTable`.
 
-    Each job runs as one unit per seed (`split_seeds`: the rows are the same, as `run_job`
-    builds policies afresh per seed), so a long cell does not hold up a whole table. Units
-    run on `advgame.evaluation.executor.run_units`: retried when a worker dies, and never
-    recomputed after a restart when `results_dir` is given.
+    Jobs are cut into units of seeds (`split_seeds`, `unit_size`): in this process every job
+    is one unit, all its episodes played in lockstep with batched policy calls; a pool or Ray
+    gets at least three units per worker, so a long cell does not hold up a whole table. The
+    rows are the same either way. Units run on `advgame.evaluation.executor.run_units`:
+    retried when a worker dies, and never recomputed after a restart when `results_dir` is
+    given (with the same `workers`, which sets the units).
 
     Args:
         jobs: the cells to play.
@@ -254,7 +240,7 @@ def evaluate(
     if type(workers) is not int or workers < 1:
         raise ConfigError(f"workers must be an int >= 1, got {workers!r}.")
     kind, address = (executor, address) if executor is not None else _DEFAULT_EXECUTOR
-    units = split_seeds(jobs)
+    units = split_seeds(jobs, unit_size(jobs, workers, kind))
     log.info(
         "evaluating %d jobs (%d units) on %s, %d worker(s)", len(jobs), len(units), kind, workers
     )

@@ -28,6 +28,7 @@ __all__ = [
     "population_jobs",
     "shift_grid",
     "split_seeds",
+    "unit_size",
 ]
 
 SEED_STRIDE = 10_000
@@ -111,21 +112,51 @@ class EvalJob:
             raise ConfigError(f"tags {bad} must be scalars named apart from the columns {COLUMNS}.")
 
 
-def split_seeds(jobs: Sequence[EvalJob]) -> list[EvalJob]:
-    """Return one job per (job, seed): the units workers run, in row order.
+def split_seeds(jobs: Sequence[EvalJob], per_unit: int = 1) -> list[EvalJob]:
+    """Return the jobs cut into units of at most `per_unit` seeds each: what workers run.
 
-    `run_job` builds policies afresh for every seed, so the rows of the split jobs are the
-    rows of the whole ones; finer units balance the workers and make each finished seed a
-    result that a restart keeps.
+    `run_job` builds policies afresh for every seed, so the rows of the units are the rows of
+    the whole jobs, in the same order; finer units balance the workers and make each finished
+    unit a result that a restart keeps, while a unit's episodes are played in lockstep
+    (batched policy calls, `advgame.evaluation.batched`).
 
     Example:
         >>> job = EvalJob(scenario="Hopper-v5", protagonist="zero", protagonist_spec=abs,
         ...               seeds=(0, 1, 2))
         >>> [u.seeds for u in split_seeds([job])]
         [(0,), (1,), (2,)]
+        >>> [u.seeds for u in split_seeds([job], per_unit=2)]
+        [(0, 1), (2,)]
 
     """
-    return [replace(j, seeds=(s,)) for j in jobs for s in j.seeds]
+    if type(per_unit) is not int or per_unit < 1:
+        raise ConfigError(f"per_unit must be an int >= 1, got {per_unit!r}.")
+    return [
+        replace(j, seeds=tuple(j.seeds[i : i + per_unit]))
+        for j in jobs
+        for i in range(0, len(j.seeds), per_unit)
+    ]
+
+
+def unit_size(jobs: Sequence[EvalJob], workers: int, executor: str = "local") -> int:
+    """Seeds per unit for `workers`: whole jobs in this process, else >= 3 units per worker.
+
+    Playing in this process (local, one worker) keeps every job whole, so all its episodes
+    run in lockstep; a pool or Ray gets units of as many seeds as still leave at least three
+    units per worker (one seed each when there are fewer), so W workers stay busy to the end.
+
+    Example:
+        >>> job = EvalJob(scenario="Hopper-v5", protagonist="zero", protagonist_spec=abs,
+        ...               seeds=tuple(range(12)))
+        >>> unit_size([job], workers=1), unit_size([job], workers=2), unit_size([job], 8)
+        (12, 2, 1)
+
+    """
+    longest = max((len(j.seeds) for j in jobs), default=1)
+    if executor == "local" and workers == 1:
+        return longest
+    total = sum(len(j.seeds) for j in jobs)
+    return max(1, min(longest, total // (3 * workers)))
 
 
 # -- building populations of jobs -----------------------------------------------------------

@@ -143,6 +143,9 @@ class SB3Policy:
         self._ready = False
         self._box: tuple[np.ndarray, np.ndarray] | None = None
         self._squash = False
+        self._head: Any = None
+        self._sampler: Any = None
+        self._stats = (obs_mean, obs_var)
 
     @property
     def observation_std(self) -> np.ndarray | None:
@@ -156,6 +159,19 @@ class SB3Policy:
 
             torch.manual_seed(seed)
 
+    @property
+    def batch_key(self) -> tuple | None:
+        """Equal for policies that `act_batch` may serve together (same frozen net and normalizer).
+
+        ``None`` where `act_batch` could only go row by row: an actor `ActorForward` does not
+        cover, or a sampling policy other than a PPO Gaussian.
+        """
+        self._prepare()
+        if (self._head if self.deterministic else self._sampler) is None:
+            return None  # no lean forward pass (or a sampling non-PPO policy): act row by row
+        stats = (id(self._stats[0]), id(self._stats[1]), self.clip_obs)
+        return (id(self.model), *stats, self.deterministic)
+
     def act(self, observation: Any) -> Any:
         """The policy's action for one raw observation.
 
@@ -164,35 +180,78 @@ class SB3Policy:
         conditioned tasks, ``MultiInputPolicy``) goes through SB3's ``predict`` unnormalized.
         """
         if isinstance(observation, dict):
-            if self.mean is not None:
-                raise ConfigError(
-                    "A Dict observation cannot go through a Box normalizer; train goal-"
-                    "conditioned protagonists with normalize=False."
-                )
-            return self.model.predict(observation, deterministic=self.deterministic)[0]
-        obs = np.asarray(observation)
+            return self._predict_dict(observation)
+        return self._predict(self._normalize(np.asarray(observation))[None])[0]
+
+    def act_batch(self, observations: Any) -> Any:
+        """The actions for a batch of raw observations ``[n, ...]``.
+
+        Deterministic: row ``i`` is exactly `act`'s, from one batch-invariant forward pass
+        (`advgame.training.forward`) where the actor is a plain one, else row by row. Sampling
+        (a PPO Gaussian, as the training loop's frozen opponents act): one forward pass and one
+        draw of ``[n, action]`` normals from torch's generator: the same distribution as `act`,
+        not the same draws as n calls of it (torch fills a long tensor with another algorithm).
+        A Dict batch (arrays ``[n, ...]`` per key) goes through SB3's ``predict``.
+        """
+        if isinstance(observations, dict):
+            return self._predict_dict(observations)
+        return self._predict(self._normalize(np.asarray(observations)))
+
+    def _predict_dict(self, observation: dict) -> Any:
+        """SB3's ``predict`` for a Dict observation (``MultiInputPolicy``), unnormalized."""
+        if self.mean is not None:
+            raise ConfigError(
+                "A Dict observation cannot go through a Box normalizer; train goal-"
+                "conditioned protagonists with normalize=False."
+            )
+        return self.model.predict(observation, deterministic=self.deterministic)[0]
+
+    def _normalize(self, obs: np.ndarray) -> np.ndarray:
         if self.mean is not None and self.std is not None:
             obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs)
-        return self._predict(obs.astype(np.float32, copy=False))
+        return obs.astype(np.float32, copy=False)
+
+    def _prepare(self) -> None:
+        """Once: eval mode, the action box, and the lean forward pass (`ActorForward`)."""
+        if self._ready:
+            return
+        from advgame.training.forward import ActorForward
+
+        policy = self.model.policy
+        policy.set_training_mode(False)
+        space = self.model.action_space
+        self._box = (space.low, space.high) if hasattr(space, "low") else None
+        self._squash = bool(getattr(policy, "squash_output", False))
+        forward = ActorForward.of(policy)
+        self._head = forward if self.deterministic else None
+        gaussian = forward is not None and forward.kind == "mean" and hasattr(policy, "log_std")
+        self._sampler = forward if gaussian and hasattr(policy, "mlp_extractor") else None
+        self._ready = True
 
     def _predict(self, obs: np.ndarray) -> Any:
-        """SB3's ``predict`` for one flat observation, without its batching and checks.
+        """SB3's ``predict`` for a batch of normalized observations, without its checks.
 
         Frozen opponents call this every step, so the per-call overhead matters: the network
-        runs under ``no_grad`` in eval mode and a Box action is clipped as SB3 does.
+        runs under ``no_grad`` in eval mode, a plain actor skips SB3's distribution objects
+        (`ActorForward`; a PPO Gaussian samples ``mean + std * randn`` as SB3's ``rsample``
+        does, bit for bit for one row), and a Box action is clipped as SB3 does.
         """
         import torch
 
+        self._prepare()
         policy = self.model.policy
-        if not self._ready:
-            policy.set_training_mode(False)
-            space = self.model.action_space
-            self._box = (space.low, space.high) if hasattr(space, "low") else None
-            self._squash = bool(getattr(policy, "squash_output", False))
-            self._ready = True
-        with torch.no_grad():
-            action = policy._predict(torch.as_tensor(obs[None]), deterministic=self.deterministic)
-        out = action.cpu().numpy()[0]
+        x = torch.as_tensor(obs)
+        if self._head is not None:
+            action = self._head(x)
+        elif self._sampler is not None:  # SB3's Gaussian sample, the same draws for one row
+            with torch.no_grad():
+                mean = self._sampler(x)
+                action = mean + torch.randn(mean.shape) * policy.log_std.exp()
+        else:
+            with torch.no_grad():
+                rows = [policy._predict(x[i : i + 1], self.deterministic) for i in range(len(x))]
+            action = torch.cat(rows)
+        out = action.cpu().numpy()
         if self._box is not None:
             out = policy.unscale_action(out) if self._squash else np.clip(out, *self._box)
         return out

@@ -1,7 +1,7 @@
 """One learning agent of the alternation loop: its views, normalizer and SB3 model.
 
-A `Side` owns a VecEnv of `SingleAgentView`s of one agent (protagonist or adversary), an
-optional `VecNormalize`, and the Stable-Baselines3 model that learns on them. The loop swaps
+A `Side` owns a VecEnv of `SingleAgentView`s of one agent (protagonist or adversary): a
+`VectorView` in this process or a `SubprocVecEnv`; an optional `VecNormalize`; and the Stable-Baselines3 model that learns on them. The loop swaps
 the frozen opponents inside the views between phases (`Side.set_policies`), trains for a
 number of steps (`Side.learn`), and checkpoints (`Side.save`, `Side.load`).
 """
@@ -24,11 +24,14 @@ log = logging.getLogger(__name__)
 
 
 def _make_venv(env_fns: Sequence[Callable[[], Any]], vec_env: str) -> Any:
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    """In-process views in lockstep (`VectorView`: opponents batched), or one process per view."""
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    from advgame.core.vector import VectorView
 
     if vec_env == "subproc" and len(env_fns) > 1:
         return SubprocVecEnv(list(env_fns), start_method="forkserver")
-    return DummyVecEnv(list(env_fns))
+    return VectorView(list(env_fns))
 
 
 class EpisodeStats:
@@ -104,7 +107,10 @@ class Side:
         total_steps: planned steps over the run (for learning-rate decay).
         normalize: wrap the views in `VecNormalize` (observations and rewards).
         tensorboard_log: a folder for SB3's TensorBoard scalars, or None.
-        vec_env: ``"dummy"`` (in-process; fastest for cheap envs on few cores) or ``"subproc"``.
+        vec_env: ``"dummy"``: the views in this process, stepped in lockstep by
+            `advgame.core.vector.VectorView` (frozen opponents called once per step for all
+            views; fastest for cheap task bases on few cores), or ``"subproc"``: one
+            `SubprocVecEnv` worker per view (heavy task bases, many cores).
 
     """
 

@@ -1,0 +1,131 @@
+"""Batched evaluation against the per-episode path, measured side by side in one run.
+
+A payoff table of 4 SB3 PPO protagonists × 6 adversary columns × 3 seeds on Hopper-v5, one
+worker (``evaluate(jobs, workers=1)`` runs `run_job` per job in this process):
+
+* ``today``: the path before this change: `play_job_sequential` per job (one game, `rollout`
+  seed by seed, one policy call per agent per move) with SB3's own ``policy._predict`` per
+  call (`ActorForward` switched off), as `SB3Policy` acted before.
+* ``sequential``: `advgame.evaluation.batched.play_job_sequential` per job, with the leaner
+  `ActorForward` per call (same actions, bit for bit).
+* ``batched``: `run_job` per job (all episodes of a job in lockstep, one policy call per agent
+  per move for all of them: `advgame.evaluation.batched.play_job`).
+
+Protagonists and the learned adversaries are PPO networks ([64, 64]) briefly trained here
+(``--train`` steps each; deterministic actions), so episodes last long enough for the per-step
+cost to matter; columns: nominal, ``state-gauss-0.1``, ``action-gauss-0.1``, ``shift-uniform``
+and two learned PPO adversaries (observation, preset ``default``; force, preset ``rarl``).
+The two paths run in ``--rounds`` interleaved rounds; reported are the median episodes per
+second of each and the median per-round ratio, and the rows of both are checked equal.
+Run: ``python benchmarks/bench_eval_batch.py`` (``--rounds``, ``--episodes``, ``--train``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from advgame.core.views import view_factory
+from advgame.evaluation import AdversarySetup, population_jobs, run_job
+from advgame.evaluation.batched import play_job_sequential
+from advgame.training.checkpoint import SB3Checkpoint
+
+ENV = "Hopper-v5"
+GOAL = 4.0
+
+
+def _still(obs: Any) -> np.ndarray:
+    """The protagonist the learned adversaries train against: zero torques."""
+    return np.zeros(3, dtype=np.float32)
+
+
+def _ppo(env_fn: Any, steps: int, seed: int, path: Path) -> SB3Checkpoint:
+    from stable_baselines3 import PPO
+
+    model = PPO("MlpPolicy", env_fn(), n_steps=512, batch_size=64, seed=seed, device="cpu")
+    if steps:
+        model.learn(steps)
+    model.save(path)
+    return SB3Checkpoint(str(path), "ppo")
+
+
+def _today(job: Any) -> list[dict[str, Any]]:
+    """`play_job_sequential` with SB3's own predict per call (the policy path before batching)."""
+    from advgame.training import forward
+
+    of = forward.ActorForward.of
+    forward.ActorForward.of = staticmethod(lambda policy: None)  # type: ignore[method-assign]
+    try:
+        return play_job_sequential(job)
+    finally:
+        forward.ActorForward.of = of  # type: ignore[method-assign]
+
+
+def table(folder: Path, steps: int, episodes: int) -> list[Any]:
+    """The jobs of the 4 × 6 × 3 table (policies trained and saved under `folder`)."""
+    protagonists = {
+        f"ppo{k}": _ppo(view_factory(ENV, "protagonist"), steps, k, folder / f"p{k}.zip")
+        for k in range(4)
+    }
+    zero = {"protagonist": _still}
+    learned_obs = _ppo(
+        view_factory(ENV, "observation_adversary", zero, preset="default"),
+        steps,
+        10,
+        folder / "obs_adv.zip",
+    )
+    learned_force = _ppo(
+        view_factory(ENV, "force_adversary", zero, preset="rarl"), steps, 11, folder / "force.zip"
+    )
+    setups = {
+        "nominal": AdversarySetup.nominal(),
+        "state-gauss-0.1": AdversarySetup.from_preset(ENV, "state-gauss-0.1"),
+        "action-gauss-0.1": AdversarySetup.from_preset(ENV, "action-gauss-0.1"),
+        "shift-uniform": AdversarySetup.from_preset(ENV, "shift-uniform"),
+        "learned-obs": AdversarySetup(
+            {"preset": "default"}, {"observation_adversary": learned_obs}
+        ),
+        "learned-force": AdversarySetup({"preset": "rarl"}, {"force_adversary": learned_force}),
+    }
+    return population_jobs(ENV, protagonists, setups, seeds=(0, 1, 2), episodes=episodes)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--episodes", type=int, default=1, help="episodes per seed")
+    parser.add_argument("--train", type=int, default=4096, help="PPO steps per policy")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    with tempfile.TemporaryDirectory() as tmp:
+        jobs = table(Path(tmp), args.train, args.episodes)
+        n = sum(len(j.seeds) * j.episodes for j in jobs)
+        paths = {"today": _today, "sequential": play_job_sequential, "batched": run_job}
+        seconds: dict[str, list[float]] = {k: [] for k in paths}
+        rows: dict[str, list[Any]] = {}
+        for r in range(args.rounds):
+            for key, play in paths.items():
+                start = time.perf_counter()
+                rows[key] = [row for job in jobs for row in play(job)]
+                seconds[key].append(time.perf_counter() - start)
+            print(f"round {r + 1}/{args.rounds}", flush=True)
+    same = rows["today"] == rows["sequential"] == rows["batched"]
+    steps = sum(int(row["length"]) for row in rows["batched"])
+    t = {k: np.asarray(v) for k, v in seconds.items()}
+    print(f"\n{ENV}: {len(jobs)} jobs, {n} episodes ({steps} protagonist steps), one worker")
+    for key in paths:
+        print(f"  {key:10s}: median {np.median(n / t[key]):7.2f} episodes/s")
+    for key in ("today", "sequential"):
+        ratio = np.median(t[key] / t["batched"])
+        print(f"  ratio batched / {key}: median {ratio:.2f} (goal >= {GOAL} vs today)")
+    print(f"  rows identical: {same}")
+
+
+if __name__ == "__main__":
+    main()
