@@ -212,7 +212,15 @@ class WhiteBoxAttackPolicy:
                     "SB3 checkpoints (advgame.training.checkpoint.SB3Checkpoint/SB3Policy) and MAPPO/IPPO "
                     "actors; a learner being trained inside a view cannot be attacked this way."
                 )
-            n = int(np.prod(self.disruptor.spaces[target].shape))
+            space = self.disruptor.spaces.get(target)  # Box targets only; Dicts have plans
+            if space is None:
+                raise ConfigError(
+                    f"{type(self.spec).__name__} on {self.agent!r} attacks a Box observation, but "
+                    f"{target!r} observes a Dict. White-box attacks do not cover Dict "
+                    "observations (goal-conditioned tasks); use random, scheduled or learned "
+                    "observation adversaries there."
+                )
+            n = int(np.prod(space.shape))
             with torch.no_grad():
                 self.spec.check_victim(target, victim, torch.zeros((1, n)))
             self.victims[target] = victim

@@ -23,3 +23,9 @@ def step_through(env: Any, actions: np.ndarray) -> float:
         if terminated or truncated:
             env.reset()
     return time.perf_counter() - start
+
+
+def quartiles(values: list[float]) -> str:
+    """``"median (q1-q3)"`` of `values`, two decimals: how the per-round ratios are reported."""
+    q1, q2, q3 = np.percentile(values, [25, 50, 75])
+    return f"{q2:.2f} ({q1:.2f}-{q3:.2f})"

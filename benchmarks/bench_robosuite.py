@@ -23,6 +23,7 @@ import time
 from typing import Any
 
 import numpy as np
+from _common import quartiles
 
 import advgame
 
@@ -81,11 +82,6 @@ def bench(sid: str, steps: int, rounds: int, seed: int) -> dict[str, list[float]
     return out
 
 
-def _quartiles(values: list[float]) -> str:
-    q1, q2, q3 = np.percentile(values, [25, 50, 75])
-    return f"{q2:.2f} ({q1:.2f}-{q3:.2f})"
-
-
 def main() -> None:
     """Benchmark every robosuite scenario (or ``--only``) and print a Markdown table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -107,8 +103,8 @@ def main() -> None:
         r = bench(sid, args.steps, args.rounds, 0)
         ratio = {k: [v / w for v, w in zip(r[k], r["raw"], strict=True)] for k in r}
         lines.append(
-            f"| {sid} | {statistics.median(r['raw']):.0f} | {_quartiles(ratio['game'])} | "
-            f"{_quartiles(ratio['game+adv'])} |"
+            f"| {sid} | {statistics.median(r['raw']):.0f} | {quartiles(ratio['game'])} | "
+            f"{quartiles(ratio['game+adv'])} |"
         )
         print(lines[-1], flush=True)
     print("\n".join(lines))

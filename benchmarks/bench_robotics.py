@@ -21,9 +21,9 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
-from typing import Any
 
 import numpy as np
+from _common import quartiles, step_through
 
 import advgame
 
@@ -35,15 +35,6 @@ TASKS = (
     "FrankaKitchen-v1",
 )
 """One task per family: maze, fetch, hand, adroit, kitchen."""
-
-
-def _time_raw(env: Any, actions: np.ndarray) -> float:
-    start = time.perf_counter()
-    for a in actions:
-        _, _, terminated, truncated, _ = env.step(a)
-        if terminated or truncated:
-            env.reset()
-    return time.perf_counter() - start
 
 
 def _time_game(game: advgame.Game, actions: np.ndarray, rng: np.random.Generator) -> float:
@@ -76,15 +67,10 @@ def bench(sid: str, steps: int, rounds: int, seed: int) -> dict[str, list[float]
     out: dict[str, list[float]] = {"raw": [], "game": [], "game+adv": []}
     for _ in range(rounds):
         actions = rng.uniform(space.low, space.high, (steps, *space.shape)).astype(space.dtype)
-        out["raw"].append(steps / _time_raw(raw, actions))
+        out["raw"].append(steps / step_through(raw, actions))
         out["game"].append(steps / _time_game(plain, actions, rng))
         out["game+adv"].append(steps / _time_game(attacked, actions, rng))
     return out
-
-
-def _quartiles(values: list[float]) -> str:
-    q1, q2, q3 = np.percentile(values, [25, 50, 75])
-    return f"{q2:.2f} ({q1:.2f}-{q3:.2f})"
 
 
 def main() -> None:
@@ -104,8 +90,8 @@ def main() -> None:
         r = bench(sid, args.steps, args.rounds, 0)
         ratio = {k: [v / w for v, w in zip(r[k], r["raw"], strict=True)] for k in r}
         lines.append(
-            f"| {sid} | {statistics.median(r['raw']):.0f} | {_quartiles(ratio['game'])} | "
-            f"{_quartiles(ratio['game+adv'])} |"
+            f"| {sid} | {statistics.median(r['raw']):.0f} | {quartiles(ratio['game'])} | "
+            f"{quartiles(ratio['game+adv'])} |"
         )
         print(lines[-1], flush=True)
     print("\n".join(lines))

@@ -260,6 +260,26 @@ def test_dict_observation_errors_name_the_fix() -> None:
         ObservationDisruptor(eps={"observation": -0.1})
 
 
+def test_white_box_attack_on_a_dict_observation_is_a_clear_error() -> None:
+    from advgame.adversaries.whitebox import MADAttack
+    from advgame.core.episodes import build_policies
+
+    class DictVictim:  # white-box by its methods (the WhiteBox protocol), Dict by its task
+        def reset(self, seed: int | None = None) -> None:
+            pass
+
+        def act(self, observation: Any) -> np.ndarray:
+            return np.zeros(4, dtype=np.float32)
+
+        action_mean = action_std = value = q_value = act
+
+    game = advgame.make(
+        "FetchReach-v4", disruptors=[ObservationDisruptor(eps={"desired_goal": 0.01})]
+    )
+    with pytest.raises(ConfigError, match="do not cover Dict observations"):
+        build_policies(game, {"protagonist": DictVictim(), "observation_adversary": MADAttack()})
+
+
 def _her_view() -> Any:
     from advgame.adversaries import RandomAdversary
     from advgame.core.views import SingleAgentView
