@@ -209,26 +209,10 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``advgame`` (exposed for documentation and tests)."""
+def _train_parser(sub: Any) -> None:
+    """``advgame train``: every `TrainConfig` field is an option."""
     from advgame.core.config import add_arguments, field_docs, scalar_field
-    from advgame.psro import PSROConfig
     from advgame.training import METHODS, TrainConfig
-
-    parser = argparse.ArgumentParser(
-        prog="advgame",
-        description="Robust RL as adversarial PettingZoo games.",
-        epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
-    p = sub.add_parser("list", help="list scenarios (and their presets)")
-    p.add_argument("ids", nargs="*", help="scenario ids (default: all)")
-    p.add_argument("--family", help="only this family (mujoco, box2d, ...)")
-    p.add_argument("--presets", action="store_true", help="also list each scenario's presets")
-    p.set_defaults(func=_cmd_list)
 
     p = sub.add_parser(
         "train",
@@ -260,11 +244,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_arguments(p, TrainConfig)
     p.set_defaults(func=_cmd_train)
 
-    p = sub.add_parser("resume", help="continue an interrupted run")
-    p.add_argument("run_dir", help="the run directory")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=_cmd_resume)
 
+def _evaluate_parser(sub: Any) -> None:
+    """``advgame evaluate``: protagonists, adversary columns, seeds, executor."""
     p = sub.add_parser(
         "evaluate",
         help="evaluate fixed policies against chosen adversary columns",
@@ -285,6 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_evaluate)
 
+
+def _psro_parser(sub: Any) -> None:
+    """``advgame psro``: every `PSROConfig` field is an option."""
+    from advgame.core.config import add_arguments
+    from advgame.psro import PSROConfig
+
     p = sub.add_parser(
         "psro",
         help="population training, PSRO-style: best responses and payoffs as jobs",
@@ -300,6 +288,31 @@ def build_parser() -> argparse.ArgumentParser:
     add_arguments(p, PSROConfig)
     p.set_defaults(func=_cmd_psro)
 
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``advgame`` (exposed for documentation and tests)."""
+    parser = argparse.ArgumentParser(
+        prog="advgame",
+        description="Robust RL as adversarial PettingZoo games.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("list", help="list scenarios (and their presets)")
+    p.add_argument("ids", nargs="*", help="scenario ids (default: all)")
+    p.add_argument("--family", help="only this family (mujoco, box2d, ...)")
+    p.add_argument("--presets", action="store_true", help="also list each scenario's presets")
+    p.set_defaults(func=_cmd_list)
+    _train_parser(sub)
+    p = sub.add_parser("resume", help="continue an interrupted run")
+    p.add_argument("run_dir", help="the run directory")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_resume)
+
+    _evaluate_parser(sub)
+    _psro_parser(sub)
     p = sub.add_parser("report", help="rebuild the report (Markdown + PNG) of an evaluation folder")
     p.add_argument("folder", help="a folder written by `advgame evaluate` or `advgame demo`")
     p.set_defaults(func=_cmd_report)

@@ -29,23 +29,8 @@ SHORT_FAMILIES = {"robosuite", "maze", "fetch", "hand", "adroit", "kitchen"}
 """Families whose steps are slow (robosuite: ~4-100 ms a step; gymnasium-robotics: 0.3-3 ms,
 many ids): short horizons in these tests."""
 
-ROBOTICS_SAMPLE = {
-    "PointMaze_UMaze-v3",
-    "FetchPush-v4",
-    "HandManipulateEgg_BooleanTouchSensors-v1",
-    "AdroitHandDoor-v1",
-    "FrankaKitchen-v1",
-}
-"""gymnasium-robotics: one id per family in the default suite; every other id under -m slow."""
-
-
-def _marks(sid: str) -> list[pytest.MarkDecorator]:
-    robotics = scenario_spec(sid).extra == "robotics"
-    return [pytest.mark.slow] if robotics and sid not in ROBOTICS_SAMPLE else []
-
-
 CASES = [
-    pytest.param(sid, name, id=f"{sid}:{name}", marks=_marks(sid))
+    pytest.param(sid, name, id=f"{sid}:{name}")
     for sid in advgame.list_scenarios()
     for name in scenario_spec(sid).load_presets()
 ]

@@ -3,7 +3,7 @@
 Robust-Gymnasium's Fetch and Shadow Hand state noise never reaches the observation, and its
 Maze scenarios ignore their disruptor input; the tests named ``*_reaches_*`` and
 ``test_maze_*`` show both fixed here. Conformance of every robotics id runs from the registry
-in tests/test_conformance.py (one id per family by default, every id under ``-m slow``).
+in tests/test_conformance.py (every id, in the default suite).
 """
 
 from __future__ import annotations
