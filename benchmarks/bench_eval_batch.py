@@ -8,15 +8,19 @@ worker (``evaluate(jobs, workers=1)`` runs `run_job` per job in this process):
   call (`ActorForward` switched off), as `SB3Policy` acted before.
 * ``sequential``: `advgame.evaluation.batched.play_job_sequential` per job, with the leaner
   `ActorForward` per call (same actions, bit for bit).
-* ``batched``: `run_job` per job (all episodes of a job in lockstep, one policy call per agent
-  per move for all of them: `advgame.evaluation.batched.play_job`).
+* ``per-job``: `run_job` per job (all episodes of one job in lockstep, one policy call per
+  agent per move for them: the first pass of batching).
+* ``batched``: ``evaluate(jobs, workers=1)`` (the jobs grouped by up to `LOCKSTEP_EPISODES`
+  episodes and each group played in lockstep across jobs, `play_jobs`: a protagonist's network
+  is asked once per move for all its columns and seeds, a learned adversary's for all rows).
 
 Protagonists and the learned adversaries are PPO networks ([64, 64]) briefly trained here
 (``--train`` steps each; deterministic actions), so episodes last long enough for the per-step
 cost to matter; columns: nominal, ``state-gauss-0.1``, ``action-gauss-0.1``, ``shift-uniform``
 and two learned PPO adversaries (observation, preset ``default``; force, preset ``rarl``).
-The two paths run in ``--rounds`` interleaved rounds; reported are the median episodes per
-second of each and the median per-round ratio, and the rows of both are checked equal.
+The paths run in ``--rounds`` interleaved rounds; reported are the median episodes per
+second of each and the median per-round ratio, and the rows of all are checked equal.
+``--profile FILE`` writes a cProfile of one more ``batched`` run.
 Run: ``python benchmarks/bench_eval_batch.py`` (``--rounds``, ``--episodes``, ``--train``).
 """
 
@@ -32,7 +36,7 @@ import numpy as np
 import torch
 
 from advgame.core.views import view_factory
-from advgame.evaluation import AdversarySetup, population_jobs, run_job
+from advgame.evaluation import AdversarySetup, evaluate, population_jobs, run_job
 from advgame.evaluation.batched import play_job_sequential
 from advgame.training.checkpoint import SB3Checkpoint
 
@@ -101,27 +105,37 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--episodes", type=int, default=1, help="episodes per seed")
     parser.add_argument("--train", type=int, default=4096, help="PPO steps per policy")
+    parser.add_argument("--profile", default="", help="write a cProfile of a batched run here")
     args = parser.parse_args()
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory() as tmp:
         jobs = table(Path(tmp), args.train, args.episodes)
         n = sum(len(j.seeds) * j.episodes for j in jobs)
-        paths = {"today": _today, "sequential": play_job_sequential, "batched": run_job}
+        paths = {
+            "today": lambda: [row for job in jobs for row in _today(job)],
+            "sequential": lambda: [row for job in jobs for row in play_job_sequential(job)],
+            "per-job": lambda: [row for job in jobs for row in run_job(job)],
+            "batched": lambda: evaluate(jobs, workers=1, progress=False).rows,
+        }
         seconds: dict[str, list[float]] = {k: [] for k in paths}
         rows: dict[str, list[Any]] = {}
         for r in range(args.rounds):
             for key, play in paths.items():
                 start = time.perf_counter()
-                rows[key] = [row for job in jobs for row in play(job)]
+                rows[key] = play()
                 seconds[key].append(time.perf_counter() - start)
             print(f"round {r + 1}/{args.rounds}", flush=True)
-    same = rows["today"] == rows["sequential"] == rows["batched"]
+        if args.profile:
+            import cProfile
+
+            cProfile.runctx("paths['batched']()", globals(), {"paths": paths}, args.profile)
+    same = all(rows[k] == rows["today"] for k in paths)
     steps = sum(int(row["length"]) for row in rows["batched"])
     t = {k: np.asarray(v) for k, v in seconds.items()}
     print(f"\n{ENV}: {len(jobs)} jobs, {n} episodes ({steps} protagonist steps), one worker")
     for key in paths:
         print(f"  {key:10s}: median {np.median(n / t[key]):7.2f} episodes/s")
-    for key in ("today", "sequential"):
+    for key in ("today", "sequential", "per-job"):
         ratio = np.median(t[key] / t["batched"])
         print(f"  ratio batched / {key}: median {ratio:.2f} (goal >= {GOAL} vs today)")
     print(f"  rows identical: {same}")
