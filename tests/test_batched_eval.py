@@ -104,3 +104,16 @@ def test_lockstep_groups_keep_job_order_and_reject_bad_sizes(jobs: list[EvalJob]
     assert [len(g) for g in lockstep_groups(jobs, episodes=1)] == [1] * len(jobs)
     with pytest.raises(ConfigError, match="episodes must be an int >= 1"):
         lockstep_groups(jobs, episodes=0)
+
+
+def test_jobs_with_a_sampling_policy_are_played_alone(
+    jobs: list[EvalJob], one_torch_thread: None
+) -> None:
+    import dataclasses
+
+    spec = jobs[0].protagonist_spec
+    sampling = dataclasses.replace(spec, deterministic=False)
+    alone = [dataclasses.replace(j, protagonist_spec=sampling, seeds=(j.seeds[0],), episodes=1)
+             for j in jobs[:4]]  # fmt: skip
+    want = [row for job in alone for row in play_job_sequential(job)]
+    _same([row for rows in play_jobs(alone) for row in rows], want)

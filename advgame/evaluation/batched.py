@@ -97,7 +97,7 @@ def play_jobs(jobs: Sequence[EvalJob]) -> list[list[dict[str, Any]]]:
     One game per episode across all `jobs`, so before each move the policies of one agent that
     share a ``batch_key`` (the copies of one frozen network, whatever the job) are asked once
     for all their games. A job whose episodes are not independent (see the module docstring)
-    is played alone, by the per-episode path when it has more than one episode.
+    is played alone, by the per-episode path.
     """
     plans: list[tuple[list[tuple[int, int]], list[Any], list[Any]] | None] = []
     try:
@@ -134,8 +134,8 @@ def _plan(job: EvalJob) -> tuple[list[tuple[int, int]], list[Any], list[Any]] | 
     except BaseException:
         _close(games)
         raise
-    if len(episodes) > 1 and not _independent(games[0], policies[0]):
-        _close(games)
+    if not _independent(games[0], policies[0]):  # alone, even with one episode: a sampling
+        _close(games)  # policy's draws would interleave with other jobs' in a group
         return None
     return episodes, games, policies
 
