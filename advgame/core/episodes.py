@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from gymnasium import spaces
 
-from advgame.core.policy import ConstantPolicy, Policy, act_batch, as_policy
+from advgame.core.policy import ConstantPolicy, Policy, as_policy
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -148,31 +148,50 @@ def rollout_batch(
         reseed_policies(pols, seed)
         game.reset(seed=seed)
         results.append(EpisodeResult(clipped=dict.fromkeys(game.adversaries, 0)))
+    keys = [_batch_keys(pols) for pols in policies]
     live = [k for k, game in enumerate(games) if game.agents]
     while live:
-        actions = _batched_actions([games[k] for k in live], [policies[k] for k in live])
+        actions = _batched_actions(games, policies, keys, live)
         for k, acts in zip(live, actions, strict=True):
             _record(results[k], games[k].play(acts), games[k].protagonists[0])
         live = [k for k in live if games[k].agents]
     return results
 
 
+def _batch_keys(policies: Mapping[str, Policy]) -> dict[str, Any]:
+    """Per agent: what its policy is grouped by (its ``batch_key``, or itself if it has none)."""
+    out = {}
+    for a, p in policies.items():
+        key = getattr(p, "batch_key", None) if hasattr(p, "act_batch") else None
+        out[a] = (a, key) if key is not None else (a, id(p))
+    return out
+
+
 def _batched_actions(
-    games: Sequence[Game], policies: Sequence[Mapping[str, Policy]]
+    games: Sequence[Game],
+    policies: Sequence[Mapping[str, Policy]],
+    keys: Sequence[Mapping[str, Any]],
+    live: Sequence[int],
 ) -> list[dict[str, Any]]:
-    """Each game's actions for its next move, the policies of one agent asked together."""
-    if len(games) == 1:  # one game: no grouping to do
-        game, pols = games[0], policies[0]
+    """The actions of games `live` for their next move; policies of one batch key asked at once."""
+    if len(live) == 1:  # one game: no grouping to do
+        game, pols = games[live[0]], policies[live[0]]
         return [{a: pols[a].act(game.observe(a)) for a in game.next_movers}]
-    groups: dict[str, list[tuple[int, Policy, Any]]] = {}
-    for k, (game, pols) in enumerate(zip(games, policies, strict=True)):
+    groups: dict[Any, list[tuple[int, str, Any]]] = {}
+    for j, k in enumerate(live):
+        game, mine = games[k], keys[k]
         for a in game.next_movers:
-            groups.setdefault(a, []).append((k, pols[a], game.observe(a)))
-    out: list[dict[str, Any]] = [{} for _ in games]
-    for a, rows in groups.items():
-        acts = act_batch([r[1] for r in rows], [r[2] for r in rows])
-        for (k, _, _), action in zip(rows, acts, strict=True):
-            out[k][a] = action
+            groups.setdefault(mine[a], []).append((j, a, game.observe(a)))
+    out: list[dict[str, Any]] = [{} for _ in live]
+    for rows in groups.values():
+        j0, a0, obs0 = rows[0]
+        if len(rows) == 1:
+            out[j0][a0] = policies[live[j0]][a0].act(obs0)
+            continue
+        head: Any = policies[live[j0]][a0]  # has act_batch: its batch key is not None
+        acts = head.act_batch(np.stack([r[2] for r in rows]))
+        for (j, a, _), action in zip(rows, acts, strict=True):
+            out[j][a] = action
     return out
 
 

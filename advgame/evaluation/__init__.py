@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from advgame.errors import ConfigError
+from advgame.evaluation.batched import LOCKSTEP_EPISODES
 from advgame.evaluation.columns import COLUMN_KINDS, adversary_columns, describe_column
 from advgame.evaluation.executor import EXECUTORS, first_action, run_units, write_timings
 from advgame.evaluation.jobs import (
@@ -44,6 +45,7 @@ from advgame.evaluation.jobs import (
     AdversarySetup,
     EvalJob,
     budget_sweep,
+    lockstep_groups,
     population_jobs,
     shift_grid,
     split_seeds,
@@ -83,6 +85,7 @@ __all__ = [
     "describe_column",
     "evaluate",
     "evaluate_policies",
+    "lockstep_groups",
     "population_jobs",
     "run_job",
     "run_protagonist",
@@ -190,9 +193,17 @@ def _clocked(job: EvalJob) -> EvalJob:
     return dataclasses.replace(job, protagonist_spec=wrapped)
 
 
-def run_unit(job: EvalJob) -> list[dict[str, Any]]:
-    """Play one job, its protagonists timed to their first action: what workers run."""
-    return run_job(_clocked(job))
+def run_unit(unit: EvalJob | tuple[EvalJob, ...]) -> list[dict[str, Any]]:
+    """Play one job or a group of jobs (in lockstep), protagonists timed: what workers run.
+
+    A group's rows are its jobs' rows, job after job (`advgame.evaluation.batched.play_jobs`).
+    """
+    if isinstance(unit, EvalJob):
+        return run_job(_clocked(unit))
+    from advgame.evaluation.batched import play_jobs
+
+    with _torch_threads(1):
+        return [row for rows in play_jobs([_clocked(j) for j in unit]) for row in rows]
 
 
 def evaluate(
@@ -209,9 +220,11 @@ def evaluate(
 ) -> PayoffTable:
     """Run `jobs`; return their rows, in job order (whatever the workers), as a `PayoffTable`.
 
-    Jobs are cut into units of seeds (`split_seeds`, `unit_size`): in this process every job
-    is one unit, all its episodes played in lockstep with batched policy calls; a pool or Ray
-    gets at least three units per worker, so a long cell does not hold up a whole table. The
+    In this process (local, one worker) consecutive jobs are grouped by up to
+    `LOCKSTEP_EPISODES` episodes (`lockstep_groups`) and every group is one unit, all its
+    episodes played in lockstep with batched policy calls across jobs; a pool or Ray gets
+    units of seeds (`split_seeds`, `unit_size`), at least three per worker, so a long cell does
+    not hold up a whole table. The
     rows are the same either way. Units run on `advgame.evaluation.executor.run_units`:
     retried when a worker dies, and never recomputed after a restart when `results_dir` is
     given (with the same `workers`, which sets the units).
@@ -240,7 +253,11 @@ def evaluate(
     if type(workers) is not int or workers < 1:
         raise ConfigError(f"workers must be an int >= 1, got {workers!r}.")
     kind, address = (executor, address) if executor is not None else _DEFAULT_EXECUTOR
-    units = split_seeds(jobs, unit_size(jobs, workers, kind))
+    units: list[Any] = (
+        list(lockstep_groups(jobs, LOCKSTEP_EPISODES))
+        if kind == "local" and workers == 1
+        else split_seeds(jobs, unit_size(jobs, workers, kind))
+    )
     log.info(
         "evaluating %d jobs (%d units) on %s, %d worker(s)", len(jobs), len(units), kind, workers
     )

@@ -1,12 +1,16 @@
-"""Batched evaluation: all episodes of one `EvalJob` played in lockstep (what `run_job` runs).
+"""Batched evaluation: the episodes of many `EvalJob`s played in lockstep (what `run_job` runs).
 
-A job's episodes (every seed, every episode of a seed) are independent games, so they are
-played side by side: one game per episode, each with its own freshly built policies, stepped
-move by move together (`advgame.core.episodes.rollout_batch`), and before each move the
-policies of one agent are asked for all games at once, one torch forward pass for the copies of
-a frozen SB3 network instead of one per episode. Every episode is the one the per-episode path
-(`play_job_sequential`, today's `rollout` per seed) plays with the same seed, so the rows are
-identical (``tests/test_vector.py`` checks them value for value).
+A job's episodes (every seed, every episode of a seed) are independent games, and so are the
+episodes of different jobs, so they are played side by side: one game per episode, each with
+its own freshly built policies, stepped move by move together
+(`advgame.core.episodes.rollout_batch`), and before each move the policies of one agent that
+share a ``batch_key`` are asked for all their games at once: one torch forward pass for the
+copies of a frozen SB3 network (a protagonist against every column of a table, a learned
+adversary against every protagonist) instead of one per episode. Every episode is the one the
+per-episode path (`play_job_sequential`, today's `rollout` per seed) plays with the same seed,
+so the rows are identical (``tests/test_batched_eval.py`` checks them value for value).
+`play_jobs` plays a group of jobs (`advgame.evaluation.evaluate` hands it groups of up to
+`LOCKSTEP_EPISODES` episodes in this process); `play_job` is the group of one.
 
 Two kinds of jobs keep the per-episode path, because their episodes are not independent of
 each other: a game whose disruptor shift persists across episodes (``Schedule.persist``), and a
@@ -17,14 +21,18 @@ draws from torch's global generator).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from advgame.core.episodes import EpisodeResult, build_policies, rollout, rollout_batch
 from advgame.errors import ConfigError
 from advgame.evaluation.jobs import SEED_STRIDE, EvalJob
 
-__all__ = ["play_job", "play_job_sequential"]
+__all__ = ["LOCKSTEP_EPISODES", "play_job", "play_job_sequential", "play_jobs"]
+
+LOCKSTEP_EPISODES = 128
+"""At most this many episodes (games) are played side by side by one `play_jobs` call of
+`advgame.evaluation.evaluate` (`advgame.evaluation.jobs.lockstep_groups`)."""
 
 
 def _specs(job: EvalJob, protagonists: tuple[str, ...]) -> dict[str, Any]:
@@ -80,21 +88,56 @@ def play_job(job: EvalJob) -> list[dict[str, Any]]:
 
     Rows come seed by seed, episode by episode, one per episode (`COLUMNS` and the job's tags).
     """
+    return play_jobs([job])[0]
+
+
+def play_jobs(jobs: Sequence[EvalJob]) -> list[list[dict[str, Any]]]:
+    """Play every episode of every job in lockstep; each job's rows, as `play_job_sequential`'s.
+
+    One game per episode across all `jobs`, so before each move the policies of one agent that
+    share a ``batch_key`` (the copies of one frozen network, whatever the job) are asked once
+    for all their games. A job whose episodes are not independent (see the module docstring)
+    is played alone, by the per-episode path.
+    """
+    plans: list[tuple[list[tuple[int, int]], list[Any], list[Any]] | None] = []
+    try:
+        for job in jobs:
+            plans.append(_plan(job))
+        batch = [p for p in plans if p is not None]
+        results = rollout_batch(
+            [g for _, games, _ in batch for g in games],
+            [pol for _, _, pols in batch for pol in pols],
+            [s * SEED_STRIDE + i for eps, _, _ in batch for s, i in eps],
+        )
+    except BaseException:
+        _close([g for p in plans if p is not None for g in p[1]])
+        raise
+    out, at = [], 0
+    for job, plan in zip(jobs, plans, strict=True):
+        if plan is None:
+            out.append(play_job_sequential(job))
+            continue
+        episodes, games, _ = plan
+        mine, at = results[at : at + len(episodes)], at + len(episodes)
+        _POOL.give(job, games)
+        out.append(_rows(job, [(s, i, r) for (s, i), r in zip(episodes, mine, strict=True)]))
+    return out
+
+
+def _plan(job: EvalJob) -> tuple[list[tuple[int, int]], list[Any], list[Any]] | None:
+    """`job`'s episodes, games and built policies; None if it must be played alone."""
     episodes = [(seed, i) for seed in job.seeds for i in range(job.episodes)]
     games = _POOL.take(job, len(episodes))
     try:
         specs = _specs(job, games[0].protagonists)
         policies = [_policies(job, game, specs) for game in games]
-        if len(episodes) > 1 and not _independent(games[0], policies[0]):
-            _close(games)
-            return play_job_sequential(job)
-        seeds = [seed * SEED_STRIDE + i for seed, i in episodes]
-        results = rollout_batch(games, policies, seeds)
     except BaseException:
         _close(games)
         raise
-    _POOL.give(job, games)
-    return _rows(job, [(s, i, r) for (s, i), r in zip(episodes, results, strict=True)])
+    if not _independent(games[0], policies[0]):  # alone, even with one episode: a sampling
+        _close(games)  # policy's draws would interleave with other jobs' in a group
+        return None
+    return episodes, games, policies
 
 
 def _close(games: list[Any]) -> None:
@@ -112,6 +155,9 @@ class _GamePool:
     """
 
     KEYS = 8
+    """Scenarios and option sets kept at most."""
+    PER_KEY = 2 * LOCKSTEP_EPISODES
+    """Games kept per scenario and option set at most."""
 
     def __init__(self) -> None:
         self._free: dict[str, list[Any]] = {}
@@ -124,9 +170,8 @@ class _GamePool:
         """`n` games of `job`'s scenario and options, kept ones first."""
         import advgame
 
-        free = self._free.pop(self._key(job), [])
-        games = free[:n]
-        _close(free[n:])
+        free = self._free.get(self._key(job), [])
+        games = [free.pop() for _ in range(min(n, len(free)))]
         while len(games) < n:
             games.append(advgame.make(job.scenario, **job.make_kwargs))
         return games
@@ -136,10 +181,14 @@ class _GamePool:
         scaled = any(
             getattr(d.spec, "space", "raw") == "normalized" for d in games[0].disruptors.values()
         )
-        if scaled or (len(self._free) >= self.KEYS and self._key(job) not in self._free):
+        key = self._key(job)
+        if scaled or (len(self._free) >= self.KEYS and key not in self._free):
             _close(games)
             return
-        self._free[self._key(job)] = games
+        free = self._free.setdefault(key, [])
+        room = max(0, self.PER_KEY - len(free))
+        free.extend(games[:room])
+        _close(games[room:])
 
 
 _POOL = _GamePool()

@@ -25,6 +25,7 @@ __all__ = [
     "AdversarySetup",
     "EvalJob",
     "budget_sweep",
+    "lockstep_groups",
     "population_jobs",
     "shift_grid",
     "split_seeds",
@@ -157,6 +158,37 @@ def unit_size(jobs: Sequence[EvalJob], workers: int, executor: str = "local") ->
         return longest
     total = sum(len(j.seeds) for j in jobs)
     return max(1, min(longest, total // (3 * workers)))
+
+
+def lockstep_groups(jobs: Sequence[EvalJob], episodes: int = 128) -> list[tuple[EvalJob, ...]]:
+    """Return consecutive jobs grouped by up to `episodes` episodes: what one process plays at once.
+
+    Each group is played in lockstep (`advgame.evaluation.batched.play_jobs`), so a frozen
+    network is asked once per move for every game of the group that it plays; a job with more
+    episodes than `episodes` is a group of its own. The groups, flattened, are `jobs`.
+
+    Example:
+        >>> job = EvalJob(scenario="Hopper-v5", protagonist="zero", protagonist_spec=abs,
+        ...               seeds=(0, 1, 2))
+        >>> [len(g) for g in lockstep_groups([job] * 5, episodes=6)]
+        [2, 2, 1]
+
+    """
+    if type(episodes) is not int or episodes < 1:
+        raise ConfigError(f"episodes must be an int >= 1, got {episodes!r}.")
+    groups: list[tuple[EvalJob, ...]] = []
+    group: list[EvalJob] = []
+    size = 0
+    for job in jobs:
+        n = len(job.seeds) * job.episodes
+        if group and size + n > episodes:
+            groups.append(tuple(group))
+            group, size = [], 0
+        group.append(job)
+        size += n
+    if group:
+        groups.append(tuple(group))
+    return groups
 
 
 # -- building populations of jobs -----------------------------------------------------------
