@@ -29,3 +29,18 @@ def quartiles(values: list[float]) -> str:
     """``"median (q1-q3)"`` of `values`, two decimals: how the per-round ratios are reported."""
     q1, q2, q3 = np.percentile(values, [25, 50, 75])
     return f"{q2:.2f} ({q1:.2f}-{q3:.2f})"
+
+
+def ratio_row(name: str, rates: dict[str, list[float]]) -> str:
+    """A Markdown row: median raw steps/s, then every other variant's per-round ratio to raw.
+
+    `rates` maps ``"raw"`` and each variant to its steps/s in the same interleaved rounds.
+    """
+    import statistics
+
+    cells = [
+        quartiles([v / w for v, w in zip(values, rates["raw"], strict=True)])
+        for key, values in rates.items()
+        if key != "raw"
+    ]
+    return f"| {name} | {statistics.median(rates['raw']):.0f} | " + " | ".join(cells) + " |"

@@ -18,12 +18,11 @@ same round — robust to the machine's drift. Run: ``python benchmarks/bench_rob
 from __future__ import annotations
 
 import argparse
-import statistics
 import time
 from typing import Any
 
 import numpy as np
-from _common import quartiles
+from _common import ratio_row
 
 import advgame
 
@@ -101,11 +100,7 @@ def main() -> None:
     ]
     for sid in ids:
         r = bench(sid, args.steps, args.rounds, 0)
-        ratio = {k: [v / w for v, w in zip(r[k], r["raw"], strict=True)] for k in r}
-        lines.append(
-            f"| {sid} | {statistics.median(r['raw']):.0f} | {quartiles(ratio['game'])} | "
-            f"{quartiles(ratio['game+adv'])} |"
-        )
+        lines.append(ratio_row(sid, r))
         print(lines[-1], flush=True)
     print("\n".join(lines))
 

@@ -19,11 +19,10 @@ in the same round — robust to the machine's drift. Run: ``python benchmarks/be
 from __future__ import annotations
 
 import argparse
-import statistics
 import time
 
 import numpy as np
-from _common import quartiles, step_through
+from _common import ratio_row, step_through
 
 import advgame
 
@@ -88,11 +87,7 @@ def main() -> None:
     ]
     for sid in args.only or TASKS:
         r = bench(sid, args.steps, args.rounds, 0)
-        ratio = {k: [v / w for v, w in zip(r[k], r["raw"], strict=True)] for k in r}
-        lines.append(
-            f"| {sid} | {statistics.median(r['raw']):.0f} | {quartiles(ratio['game'])} | "
-            f"{quartiles(ratio['game+adv'])} |"
-        )
+        lines.append(ratio_row(sid, r))
         print(lines[-1], flush=True)
     print("\n".join(lines))
 
