@@ -10,6 +10,7 @@ import re
 import shutil
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -20,23 +21,6 @@ from advgame.core.registry import list_scenarios, scenario_spec
 from advgame.training import METHODS, TrainConfig
 
 PNG = b"\x89PNG\r\n\x1a\n"
-TINY = [
-    "--scenario",
-    "Hopper-v5",
-    "--iterations",
-    "2",
-    "--protagonist-steps",
-    "128",
-    "--adversary-steps",
-    "128",
-    "--eval-episodes",
-    "1",
-    "--set",
-    'protagonist_hparams={"n_steps": 64}',
-    "--set",
-    'adversary_hparams={"n_steps": 64}',
-    "--no-progress",
-]
 WALL_CLOCK = ("fps", "wall_s")
 
 
@@ -51,10 +35,10 @@ def progress(run: Path) -> list[dict[str, str]]:
 
 
 @pytest.fixture(scope="module")
-def cli_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def cli_run(tmp_path_factory: pytest.TempPathFactory, tiny_atla: Callable[..., list[str]]) -> Path:
     """`advgame train --method atla` with tiny sizes, through `main`."""
     run = tmp_path_factory.mktemp("cli") / "atla"
-    assert main(["train", "--method", "atla", *TINY, "--run-dir", str(run)]) == 0
+    assert main(["train", *tiny_atla(), "--run-dir", str(run)]) == 0
     return run
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import gymnasium as gym
@@ -22,24 +23,6 @@ from advgame.evaluation import (
     sb3_protagonist,
 )
 from advgame.training.population import Population
-
-TINY_ATLA = [
-    "--scenario",
-    "Hopper-v5",
-    "--iterations",
-    "2",
-    "--protagonist-steps",
-    "128",
-    "--adversary-steps",
-    "128",
-    "--eval-episodes",
-    "1",
-    "--set",
-    'protagonist_hparams={"n_steps": 64}',
-    "--set",
-    'adversary_hparams={"n_steps": 64}',
-    "--no-progress",
-]
 
 
 def rows(folder: Path) -> list[dict[str, str]]:
@@ -92,10 +75,10 @@ def plain_returns(folder: Path, seeds: list[int]) -> list[float]:
 
 
 @pytest.fixture(scope="module")
-def atla_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def atla_run(tmp_path_factory: pytest.TempPathFactory, tiny_atla: Callable[..., list[str]]) -> Path:
     """A tiny `advgame train --method atla` run: snapshots @0, @1, @2 of its adversary."""
     run = tmp_path_factory.mktemp("runs") / "atla"
-    assert main(["train", "--method", "atla", *TINY_ATLA, "--run-dir", str(run)]) == 0
+    assert main(["train", *tiny_atla(), "--run-dir", str(run)]) == 0
     return run
 
 

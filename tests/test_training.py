@@ -17,6 +17,7 @@ import subprocess
 import sys
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -397,32 +398,6 @@ def test_atla_with_a_td3_protagonist_and_a_sac_adversary(tmp_path: Path) -> None
 
 
 # -- kill and resume --------------------------------------------------------------------------
-def _train_command(run: Path, iterations: int) -> list[str]:
-    return [
-        advgame_script(),
-        "train",
-        "--method",
-        "atla",
-        "--scenario",
-        HOPPER,
-        "--iterations",
-        str(iterations),
-        "--protagonist-steps",
-        "128",
-        "--adversary-steps",
-        "128",
-        "--eval-episodes",
-        "1",
-        "--set",
-        'protagonist_hparams={"n_steps": 64}',
-        "--set",
-        'adversary_hparams={"n_steps": 64}',
-        "--run-dir",
-        str(run),
-        "--no-progress",
-    ]
-
-
 def _wait_for_iteration(proc: subprocess.Popen, run: Path, timeout: float = 120.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -436,11 +411,13 @@ def _wait_for_iteration(proc: subprocess.Popen, run: Path, timeout: float = 120.
     raise AssertionError(f"no iteration finished in {timeout} s")
 
 
-def test_a_run_killed_by_sigkill_resumes_to_the_end(tmp_path: Path) -> None:
+def test_a_run_killed_by_sigkill_resumes_to_the_end(
+    tmp_path: Path, tiny_atla: Callable[..., list[str]]
+) -> None:
     run, iterations = tmp_path / "run", 6
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     proc = subprocess.Popen(
-        _train_command(run, iterations),
+        [advgame_script(), "train", *tiny_atla(iterations), "--run-dir", str(run)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
