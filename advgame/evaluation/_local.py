@@ -32,6 +32,7 @@ from advgame.evaluation.executor import (
     pickled,
     retry,
     ship,
+    timed,
 )
 from advgame.evaluation.executor import _init_worker as init_worker
 
@@ -53,18 +54,6 @@ def _warm_forkserver(ctx: Any) -> None:
     ctx.set_forkserver_preload(list(dict.fromkeys([*theirs, *_PRELOAD, *heavy])))
 
 
-def _in_process(fn: Callable[[Any], Any], unit: Any) -> dict[str, Any]:
-    """`execute` without pickling (workers=1: lambdas and live policies work too)."""
-    from advgame.evaluation import executor
-
-    start = time.time()
-    executor._FIRST.clear()
-    value = fn(unit)
-    first = executor._FIRST[0] - start if executor._FIRST else None
-    return {"value": value, "startup_s": first, "pid": os.getpid(), "start": start,
-            "end": time.time()}  # fmt: skip
-
-
 def run_local(
     fn: Callable[[Any], Any], units: Sequence[Any], keys: Sequence[str], opts: Options
 ) -> list[UnitRecord]:
@@ -76,14 +65,13 @@ def run_local(
                 rec.attempts += 1
                 rec.extra["submitted"] = time.time()
                 try:
-                    out = _in_process(fn, unit)
+                    out = timed(fn, unit)  # no pickling: lambdas and live policies work
                 except AdvgameError:
                     raise
                 except Exception as exc:
                     if retry(rec, f"{type(exc).__name__}: {exc}", opts):
                         continue
                     break
-                rec.error = None
                 finish(rec, out, opts)
                 break
         return recs
@@ -167,7 +155,6 @@ def _round(
                     again.append(i)
                 settled.add(i)
                 continue
-            recs[i].error = None
             finish(recs[i], out, opts)
             settled.add(i)
     except BrokenProcessPool:
@@ -196,7 +183,6 @@ def _after_break(
             continue
         rec = recs[i]
         if fut.done() and not fut.cancelled() and fut.exception() is None:
-            rec.error = None
             finish(rec, fut.result(), opts)  # finished before the break, not yet collected
         elif rec.key in started:
             if retry(rec, "the worker process died (killed or out of memory)", opts):

@@ -104,7 +104,6 @@ def run_ray(
                 if retry(recs[i], f"{type(exc).__name__}: {str(exc).splitlines()[0]}", opts):
                     queue.append(i)
                 continue
-            recs[i].error = None
             finish(recs[i], out, opts)
     except BaseException:
         for ref in inflight:

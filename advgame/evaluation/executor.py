@@ -46,6 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from advgame.errors import AdvgameError, ConfigError
+from advgame.training.population import PATH_FIELDS
 
 __all__ = [
     "EXECUTORS",
@@ -63,8 +64,6 @@ log = logging.getLogger(__name__)
 
 EXECUTORS = ("local", "ray")
 """Executor names accepted by `run_units` and `advgame.evaluation.evaluate`."""
-PATH_FIELDS = ("path", "normalizer")
-"""Spec fields naming files that travel with a unit (as in `advgame.training.population`)."""
 
 
 class JobFailedError(AdvgameError, RuntimeError):
@@ -134,7 +133,7 @@ def first_action() -> None:
 
 # -- files travelling with units ------------------------------------------------------------
 def _walk(obj: Any, visit: Callable[[str, Any], Any]) -> Any:
-    """Rebuild `obj` with every dataclass field in `PATH_FIELDS` passed through `visit`."""
+    """Rebuild `obj` with every file-naming dataclass field (`PATH_FIELDS`) through `visit`."""
     if isinstance(obj, dict):
         return {k: _walk(v, visit) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -172,7 +171,7 @@ def _materialize(unit: Any, files: dict[str, bytes]) -> Any:
     root = Path(tempfile.gettempdir()) / "advgame-shipped"
     local = {}
     for path, blob in files.items():
-        target = root / hashlib.sha256(blob).hexdigest()[:24] / Path(path).name
+        target = root / digest(blob) / Path(path).name
         if not target.exists():  # same content, same file: loaded models stay cached
             target.parent.mkdir(parents=True, exist_ok=True)
             tmp = target.with_name(f".{target.name}.{os.getpid()}")
@@ -203,6 +202,7 @@ def _loads(blob: bytes) -> Any:
 
 
 def pickled(obj: Any) -> bytes:
+    """`obj` pickled for a worker; a `ConfigError` saying what to change if it cannot be."""
     try:
         return pickle.dumps(obj)
     except Exception as exc:
@@ -239,19 +239,27 @@ def _forget_rewritten(unit: Any) -> None:
         checkpoint.load_model.cache_clear()
 
 
-def execute(fn_blob: bytes, unit_blob: bytes, files: dict[str, bytes]) -> dict[str, Any]:
-    """Run one unit in a worker; return its value and timing (`UnitRecord` fields)."""
-    import socket
-
-    start = time.time()
+def timed(fn: Callable[[Any], Any], unit: Any, start: float | None = None) -> dict[str, Any]:
+    """``fn(unit)``'s value and timing (`UnitRecord` fields), from `start` (default: now)."""
+    start = time.time() if start is None else start
     _FIRST.clear()
-    fn, unit = _loads(fn_blob), _materialize(_loads(unit_blob), files)
-    _forget_rewritten(unit)
     value = fn(unit)
     end = time.time()
     startup = _FIRST[0] - start if _FIRST else None
-    info = {"pid": os.getpid(), "host": socket.gethostname(), "start": start, "end": end}
-    return {"value": value, "startup_s": startup, **info}
+    return {"value": value, "startup_s": startup, "pid": os.getpid(), "start": start, "end": end}
+
+
+def execute(fn_blob: bytes, unit_blob: bytes, files: dict[str, bytes]) -> dict[str, Any]:
+    """Run one unit in a worker; return its value and timing (`UnitRecord` fields).
+
+    The clock starts before the unit is unpickled and its files written: start-up included.
+    """
+    import socket
+
+    start = time.time()
+    fn, unit = _loads(fn_blob), _materialize(_loads(unit_blob), files)
+    _forget_rewritten(unit)
+    return {**timed(fn, unit, start), "host": socket.gethostname()}
 
 
 def close_pool() -> None:
@@ -373,7 +381,8 @@ def _check(executor: str, workers: int, max_retries: int, start_method: str) -> 
 
 
 def finish(rec: UnitRecord, out: dict[str, Any], opts: Options) -> UnitRecord:
-    """Fill `rec` from a worker's answer, persist it, tick the bar."""
+    """Fill `rec` from a worker's answer (no error left), persist it, tick the bar."""
+    rec.error = None
     for name, value in out.items():
         setattr(rec, name, value)
     rec.extra["received"] = time.time()
