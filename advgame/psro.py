@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import typing
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -32,7 +31,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from advgame.core.config import load_json, save_json
+from advgame.core.config import load_json, save_json, write_atomic
 from advgame.errors import ConfigError
 from advgame.evaluation.metasolver import game_value, solve
 from advgame.evaluation.report import write_meta_report
@@ -256,9 +255,7 @@ class _PSRO:
             "solver": self.cfg.solver,
         }
         self.meta.append(entry)
-        tmp = self.dir / "meta.json.tmp"
-        tmp.write_text(json.dumps(self.meta, indent=2) + "\n")
-        os.replace(tmp, self.dir / "meta.json")
+        write_atomic(self.dir / "meta.json", json.dumps(self.meta, indent=2) + "\n")
         write_meta_report(self.dir)
         log.info("PSRO iteration %d: value %.3f", it, entry["value"])
 
@@ -308,9 +305,7 @@ class _PSRO:
         folder = self.dir / "checkpoints" / job.name.replace("@", "_")
         folder.mkdir(parents=True, exist_ok=True)
         for name, blob in result["files"].items():
-            tmp = folder / f".{name}.tmp"
-            tmp.write_bytes(blob)
-            os.replace(tmp, folder / name)
+            write_atomic(folder / name, blob)
         norm = str(folder / result["normalizer"]) if result["normalizer"] else None
         spec = SB3Checkpoint(str(folder / result["model"]), result["algo"], norm)
         side = "protagonist" if job.agent == PROTAGONIST else "adversary"

@@ -2,7 +2,7 @@
 
 Configs are frozen dataclasses with a docstring under each field (read here with `ast`, so the
 docstring is the single source of the ``--help`` text). Values are JSON-friendly scalars,
-strings, lists and dicts.
+strings, lists and dicts. `write_atomic` is how run and results files are written.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import dataclasses
 import inspect
 import itertools
 import json
+import os
 import textwrap
 import typing
 from pathlib import Path
@@ -29,6 +30,7 @@ __all__ = [
     "save_json",
     "scalar_field",
     "to_dict",
+    "write_atomic",
 ]
 
 T = TypeVar("T")
@@ -85,6 +87,21 @@ def _coerce(hint: Any, value: Any) -> Any:
         if value is not None and len(args) == 1:
             return _coerce(args[0], value)
     return value
+
+
+def write_atomic(path: str | Path, data: str | bytes) -> None:
+    """Write `data` to `path` through a temporary file beside it and one rename.
+
+    A kill at any moment leaves the old file or the new one, never part of one; the temporary
+    name carries the process id, so processes writing the same path do not collide.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    if isinstance(data, bytes):
+        tmp.write_bytes(data)
+    else:
+        tmp.write_text(data)
+    os.replace(tmp, path)
 
 
 def save_json(cfg: Any, path: str | Path) -> None:

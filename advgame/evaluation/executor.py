@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from advgame.core.config import write_atomic
 from advgame.errors import AdvgameError, ConfigError
 from advgame.training.population import PATH_FIELDS
 
@@ -174,9 +175,7 @@ def _materialize(unit: Any, files: dict[str, bytes]) -> Any:
         target = root / digest(blob) / Path(path).name
         if not target.exists():  # same content, same file: loaded models stay cached
             target.parent.mkdir(parents=True, exist_ok=True)
-            tmp = target.with_name(f".{target.name}.{os.getpid()}")
-            tmp.write_bytes(blob)
-            os.replace(tmp, target)
+            write_atomic(target, blob)
         local[path] = str(target)
     return _walk(unit, lambda _, v: local.get(v, v) if isinstance(v, str) else v)
 
@@ -290,9 +289,7 @@ def _read_part(parts: Path | None, key: str) -> UnitRecord | None:
 def _write_part(parts: Path | None, rec: UnitRecord) -> None:
     if parts is None:
         return
-    tmp = parts / f".{rec.key}.tmp"
-    tmp.write_bytes(pickle.dumps(rec))
-    os.replace(tmp, parts / f"{rec.key}.pkl")  # a kill leaves the part whole or absent
+    write_atomic(parts / f"{rec.key}.pkl", pickle.dumps(rec))  # a kill: whole or absent
 
 
 def run_units(

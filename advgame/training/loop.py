@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.config import write_atomic
 from advgame.core.episodes import filler_action, rollout
 from advgame.core.policy import ConstantPolicy
 from advgame.core.registry import load, make
@@ -287,9 +288,7 @@ def _tensorboard(folder: Path) -> Any:
 
 def write_state(run_dir: Path, state: dict[str, Any]) -> None:
     """Write ``state.json`` atomically."""
-    tmp = run_dir / "state.json.tmp"
-    tmp.write_text(json.dumps(state, indent=2) + "\n")
-    os.replace(tmp, run_dir / "state.json")
+    write_atomic(run_dir / "state.json", json.dumps(state, indent=2) + "\n")
 
 
 def append_progress(path: Path, row: dict[str, Any], keep_below: int | None = None) -> None:

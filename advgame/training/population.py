@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.config import write_atomic
 from advgame.core.registry import load
 from advgame.errors import ConfigError
 
@@ -167,11 +167,8 @@ class Population:
 
     def save(self, path: str | Path) -> None:
         """Write atomically (a crash leaves the old file or the new one, never half of one)."""
-        path = Path(path)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        base = path.parent
-        tmp.write_text(json.dumps([m.to_dict(base) for m in self.members], indent=2) + "\n")
-        os.replace(tmp, path)
+        base = Path(path).parent
+        write_atomic(path, json.dumps([m.to_dict(base) for m in self.members], indent=2) + "\n")
 
     @classmethod
     def load(cls, path: str | Path) -> Population:
