@@ -126,6 +126,11 @@ class Game(ParallelEnv):
         self._env_ds = self._model_ds + self._data_ds
         self._act_ds = [*self._env_ds, *self._action_ds, *self._reward_ds, *self._stale]
         self._held_sensing = [d for d in self._sensing if d.schedule.hold]
+        self._scaled = [
+            d
+            for d in self._sensing + self._stale
+            if getattr(d.spec, "space", "raw") == "normalized"
+        ]
         self._constant: dict[str, bool] = {}
         self._dynamic: list[tuple[str, Schedule]] = []
         self._fixed_movers = (frozenset[str](), frozenset[str]())
@@ -164,11 +169,16 @@ class Game(ParallelEnv):
         calls this with the (frozen) running std. Returns how many disruptors were updated.
         """
         count = 0
-        for d in self._sensing + self._stale:
-            if getattr(d.spec, "space", "raw") == "normalized" and target in d.targets:  # type: ignore[attr-defined]
+        for d in self._scaled:
+            if target in d.targets:  # type: ignore[attr-defined]
                 d.set_scale(target, std)  # type: ignore[attr-defined]
                 count += 1
         return count
+
+    @property
+    def scaled_targets(self) -> list[str]:
+        """The protagonists observed through normalized-space budgets (`set_observation_scale`)."""
+        return sorted({t for d in self._scaled for t in d.targets})  # type: ignore[attr-defined]
 
     # -- PettingZoo surface -----------------------------------------------------------------
     def observation_space(self, agent: str) -> spaces.Space:

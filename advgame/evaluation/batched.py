@@ -178,11 +178,8 @@ class _GamePool:
 
     def give(self, job: EvalJob, games: list[Any]) -> None:
         """Keep `games` for later jobs (or close them: scaled budgets, too many keys)."""
-        scaled = any(
-            getattr(d.spec, "space", "raw") == "normalized" for d in games[0].disruptors.values()
-        )
         key = self._key(job)
-        if scaled or (len(self._free) >= self.KEYS and key not in self._free):
+        if games[0].scaled_targets or (len(self._free) >= self.KEYS and key not in self._free):
             _close(games)
             return
         free = self._free.setdefault(key, [])

@@ -111,10 +111,7 @@ def _normalized_targets(job: BestResponseJob) -> list[str]:
 
     game = make(job.scenario, **job.make_kwargs)
     game.close()
-    normalized = [
-        d for d in game.disruptors.values() if getattr(d.spec, "space", "raw") == "normalized"
-    ]
-    return sorted({t for d in normalized for t in getattr(d, "targets", ())})
+    return game.scaled_targets
 
 
 def _opponent_std(job: BestResponseJob) -> np.ndarray | None:

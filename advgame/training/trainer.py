@@ -72,9 +72,7 @@ class Trainer:
                 raise ConfigError(
                     f"learned names {a!r}, not an adversary of this game {probe.adversaries}."
                 )
-        self.normalized_targets = [
-            d for d in probe.disruptors.values() if getattr(d.spec, "space", "raw") == "normalized"
-        ]
+        self.normalized_targets = probe.scaled_targets
         probe.close()
         self.train_kwargs = {
             "disruptors": [
