@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 import logging
 import typing
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
@@ -265,7 +265,7 @@ class _PSRO:
 
     def _mixture(self, members: list[Member], weights: list[float], it: int) -> MixtureSpec:
         keep = [(m, w) for m, w in zip(members, weights, strict=True) if w > 1e-9]
-        specs = tuple(_stochastic(m.spec) for m, _ in keep)
+        specs = tuple(m.opponent_spec() for m, _ in keep)
         total = sum(w for _, w in keep)
         return MixtureSpec(specs, tuple(w / total for _, w in keep), self.cfg.seed + it)
 
@@ -316,8 +316,3 @@ def _zero() -> Any:
     from advgame.core.registry import load
 
     return load(_ZERO)()
-
-
-def _stochastic(spec: Any) -> Any:
-    """Opponents inside a best response's games act stochastically (as in the alternation loop)."""
-    return replace(spec, deterministic=False) if hasattr(spec, "deterministic") else spec

@@ -66,6 +66,19 @@ class Member:
     meta: dict[str, Any] = field(default_factory=dict)
     """Free-form metadata (scenario, seed, returns at save time)."""
 
+    def opponent_spec(self) -> Any:
+        """The spec as an opponent inside training games plays it: sampling, not deterministic.
+
+        Frozen opponents act stochastically during training (the alternation loop and PSRO's
+        best responses); specs without a ``deterministic`` field are returned as they are.
+        """
+        spec = self.spec
+        return (
+            dataclasses.replace(spec, deterministic=False)
+            if hasattr(spec, "deterministic")
+            else spec
+        )
+
     def to_dict(self, base: Path | None = None) -> dict[str, Any]:
         """JSON form; file paths under `base` are stored relative to it (a run can move)."""
         spec = spec_to_dict(self.spec)

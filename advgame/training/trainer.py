@@ -93,7 +93,7 @@ class Trainer:
         side = self.sides[PROTAGONISTS]
         for i in range(self.cfg.n_envs):
             drawn = {
-                a: self._opponent(self.population.sample(a, self.cfg.sampling, self.rng))
+                a: self.population.sample(a, self.cfg.sampling, self.rng).opponent_spec()
                 for a in self.learned
             }
             side.set_policies(drawn, index=i)
@@ -110,7 +110,7 @@ class Trainer:
         for agent in self.learned:
             side = self.sides[agent]
             fellows = {
-                a: self._opponent(self.population.of(a)[-1]) for a in self.learned if a != agent
+                a: self.population.of(a)[-1].opponent_spec() for a in self.learned if a != agent
             }
             side.set_policies({**frozen, **fellows})
             self._push_scale(side, prot)
@@ -141,10 +141,6 @@ class Trainer:
                 )
 
     # -- helpers ----------------------------------------------------------------------------
-    def _opponent(self, member: Member) -> Any:
-        spec = member.spec
-        return replace(spec, deterministic=False) if hasattr(spec, "deterministic") else spec
-
     def _push_scale(self, side: Any, source: Any) -> None:
         """Give `side`'s games the normalizer std of `source` (the protagonist side)."""
         if not self.normalized_targets:
