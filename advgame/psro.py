@@ -41,7 +41,6 @@ from advgame.training.population import Member, Population
 __all__ = ["PSROConfig", "load_meta", "resume_psro", "run_psro"]
 
 log = logging.getLogger(__name__)
-_ZERO = "advgame.adversaries.noise:ZeroAdversary"
 PROTAGONIST = "protagonist"
 
 
@@ -199,8 +198,7 @@ class _PSRO:
         self.population = Population.load(self.pop_path) if self.pop_path.exists() else Population()
         self.meta = load_meta(run_dir)
         if not self.population.of(adversary):
-            noop = Member(f"{adversary}:noop", "adversary", adversary, _zero(), 0, learned=False)
-            self.population.add(noop)
+            self.population.add(Member.noop(adversary))
 
     def execute(self) -> Path:
         """Run every iteration not yet in ``meta.json``; return the run directory."""
@@ -310,9 +308,3 @@ class _PSRO:
         spec = SB3Checkpoint(str(folder / result["model"]), result["algo"], norm)
         side = "protagonist" if job.agent == PROTAGONIST else "adversary"
         self.population.add(Member(job.name, side, job.agent, spec, it, meta={"steps": job.steps}))
-
-
-def _zero() -> Any:
-    from advgame.core.registry import load
-
-    return load(_ZERO)()

@@ -30,7 +30,6 @@ TEAM_ALGOS = ("mappo", "ippo", *SAFE_ALGOS)
 (our torch learners) instead of one SB3 agent."""
 PROTAGONISTS = "protagonists"
 """The key of the protagonist side in `Trainer.sides` (one agent or a whole team)."""
-_ZERO = "advgame.adversaries.noise:ZeroAdversary"
 
 METHODS: dict[str, dict[str, Any]] = {
     "ppo": {"preset": "default", "learned": [], "train_budget_scale": 1.0},

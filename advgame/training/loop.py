@@ -18,9 +18,9 @@ from advgame.core.episodes import filler_action, rollout
 from advgame.core.policy import ConstantPolicy
 from advgame.core.registry import load, make
 from advgame.core.views import view_factory
-from advgame.training.config import _ZERO, PROTAGONISTS, learner_config
+from advgame.training.config import PROTAGONISTS, learner_config
 from advgame.training.learning import EpisodeStats, Side
-from advgame.training.population import Member, Population
+from advgame.training.population import ZERO, Member, Population
 from advgame.training.trainer import Trainer
 
 __all__ = ["Run"]
@@ -125,7 +125,7 @@ class Run:
 
     def _warmup(self, stats: EpisodeStats) -> None:
         prot = self.t.sides[PROTAGONISTS]
-        prot.set_policies({a: load(_ZERO)() for a in self.t.learned})
+        prot.set_policies({a: load(ZERO)() for a in self.t.learned})
         prot.learn(self.cfg.warmup_steps, stats)
 
     def _quick_eval(self, protagonists: dict[str, Any], it: int) -> dict[str, float]:
@@ -212,7 +212,7 @@ class Run:
         if folder.exists():
             shutil.rmtree(folder)
         for a in t.learned:
-            t.population.add(Member(f"{a}:noop", "adversary", a, load(_ZERO)(), 0, learned=False))
+            t.population.add(Member.noop(a))
             spec = t.sides[a].save(folder)
             final = str(folder).replace(".partial", "")
             t.population.add(Member(f"{a}@0", "adversary", a, _rebase(spec, str(folder), final), 0))

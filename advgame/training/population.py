@@ -20,10 +20,20 @@ from advgame.core.config import write_atomic
 from advgame.core.registry import load
 from advgame.errors import ConfigError
 
-__all__ = ["PATH_FIELDS", "SAMPLING", "Member", "Population", "spec_from_dict", "spec_to_dict"]
+__all__ = [
+    "PATH_FIELDS",
+    "SAMPLING",
+    "ZERO",
+    "Member",
+    "Population",
+    "spec_from_dict",
+    "spec_to_dict",
+]
 
 SAMPLING = ("latest", "uniform", "fictitious")
 PATH_FIELDS = ("path", "normalizer")
+ZERO = "advgame.adversaries.noise:ZeroAdversary"
+"""The no-op adversary, by name (the user folders build on the core, never the other way)."""
 """Spec fields holding files; stored relative to the population file when inside its folder."""
 
 
@@ -65,6 +75,11 @@ class Member:
     """Whether it is a trained snapshot (fictitious play samples only these)."""
     meta: dict[str, Any] = field(default_factory=dict)
     """Free-form metadata (scenario, seed, returns at save time)."""
+
+    @classmethod
+    def noop(cls, agent: str) -> Member:
+        """Adversary `agent`'s no-op (the nominal game) as the unlearned member ``<agent>:noop``."""
+        return cls(f"{agent}:noop", "adversary", agent, load(ZERO)(), 0, learned=False)
 
     def opponent_spec(self) -> Any:
         """The spec as an opponent inside training games plays it: sampling, not deterministic.
