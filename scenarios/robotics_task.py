@@ -77,20 +77,22 @@ class RoboticsTask(GymTask):
 
     def reset(self, seed: int | None) -> tuple[dict[str, Any], dict[str, Any]]:
         """Reset the env with `seed`; the info says ``is_success`` from the start."""
-        obs, info = self.env.reset(seed=seed)
-        self._steps = 0
-        obs = _copy(obs)
+        observations, info = super().reset(seed)
+        obs = _copy(observations[self.AGENT])
         return {self.AGENT: obs}, self._annotate(obs, dict(info))
 
     def step(self, actions: Mapping[str, Any]) -> StepResult:
         """Step the env; reward and ``is_success`` are the task's, from its true state."""
-        obs, reward, terminated, truncated, info = self._inner.step(actions[self.AGENT])
-        self._steps += 1
-        if self.max_episode_steps is not None and self._steps >= self.max_episode_steps:
-            truncated = True
-        obs = _copy(obs)
-        info = self._annotate(obs, dict(info))
-        return {self.AGENT: obs}, float(reward), 0.0, bool(terminated), bool(truncated), info
+        observations, reward, cost, terminated, truncated, info = super().step(actions)
+        obs = _copy(observations[self.AGENT])
+        return (
+            {self.AGENT: obs},
+            reward,
+            cost,
+            terminated,
+            truncated,
+            self._annotate(obs, dict(info)),
+        )
 
     def _annotate(self, obs: Any, info: dict[str, Any]) -> dict[str, Any]:
         """Add ``is_success`` and the true goals (copies of the true observation's) to `info`."""
