@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core import lockstep
 from advgame.core.policy import ConstantPolicy, Policy, as_policy
 from advgame.errors import ConfigError
 
@@ -132,7 +133,9 @@ def rollout_batch(
 ) -> list[EpisodeResult]:
     """Play one episode in each of `games` in lockstep, each the one `rollout` plays alone.
 
-    Game ``k`` plays ``policies[k]`` and resets with ``seeds[k]``. `policies` are built policies (`build_policies`), one dict per game, reseeded here. Before
+    Game ``k`` plays ``policies[k]`` and resets with ``seeds[k]``. `policies` are built
+    policies (`build_policies`), one dict per game, reseeded here. Alike games (one scenario
+    and disruptor set-up) make each move together (`advgame.core.lockstep.play_all`). Before
     each move, the policies of every game in which agent ``a`` moves are asked at once
     (`act_batch`: one forward pass for the copies of a frozen network). Random policies must
     keep their randomness to themselves (noise adversaries do); a policy drawing from a global
@@ -149,11 +152,17 @@ def rollout_batch(
         game.reset(seed=seed)
         results.append(EpisodeResult(clipped=dict.fromkeys(game.adversaries, 0)))
     keys = [_batch_keys(pols) for pols in policies]
+    same = len(games) > 1 and lockstep.alike(games)
     live = [k for k, game in enumerate(games) if game.agents]
     while live:
-        actions = _batched_actions(games, policies, keys, live)
-        for k, acts in zip(live, actions, strict=True):
-            _record(results[k], games[k].play(acts), games[k].protagonists[0])
+        actions = dict(zip(live, _batched_actions(games, policies, keys, live), strict=True))
+        for idx in lockstep.groups(games, live) if same else [[k] for k in live]:
+            agents = actions[idx[0]]  # one group: the same movers
+            moves = lockstep.play_all(
+                [games[k] for k in idx], {a: [actions[k][a] for k in idx] for a in agents}
+            )
+            for k, move in zip(idx, moves, strict=True):
+                _record(results[k], move, games[k].protagonists[0])
         live = [k for k in live if games[k].agents]
     return results
 

@@ -265,16 +265,25 @@ class Game(ParallelEnv):
         Same semantics as `step` without building the per-agent dicts; rollouts and
         single-agent views use it. Current observations: `observe`.
         """
-        if not self.agents:
-            raise ActionError("The episode is over (no live agents); call reset() before play().")
-        if not actions.keys() >= self.next_movers:
-            missing = sorted(self.next_movers - set(actions))
-            raise ActionError(
-                f"This {self.move} move needs actions for {missing} (game.next_movers)."
-            )
+        self.require(actions.keys())
         if self.move == SENSE:
             return self._sense(actions)
         return self._act(actions)
+
+    def require(self, agents: Any) -> None:
+        """Check that a move with actions for `agents` can be made now (`play`'s precondition).
+
+        Raises:
+            ActionError: the episode is over, or an agent of `next_movers` is missing.
+
+        """
+        if not self.agents:
+            raise ActionError("The episode is over (no live agents); call reset() before play().")
+        if not agents >= self.next_movers:
+            missing = sorted(self.next_movers - set(agents))
+            raise ActionError(
+                f"This {self.move} move needs actions for {missing} (game.next_movers)."
+            )
 
     def _setup(self, actions: Mapping[str, Any]) -> Move:
         """The setup move at t = 0: workspace adversaries edit the simulator, then it is re-observed."""
@@ -336,15 +345,21 @@ class Game(ParallelEnv):
             if active[d.agent]:
                 u, clipped[d.agent] = d.decode(actions[d.agent])
                 used[d.agent] = self._last[d.agent] = u
-        if self._env_ds:
-            self._disrupt_environment(used)
         acts: dict[str, Any] = {}
         for p, (space, shape) in self._p_spaces.items():
             acts[p] = protagonist_action(p, space, shape, actions[p])
+        if self._env_ds:
+            self._disrupt_environment(used)
         for d in self._action_ds:
             v = self._effective(d, used)
             if v is not None:
                 d.action(acts, v, self._rng)
+        return self._step_task(acts, used, clipped)
+
+    def _step_task(
+        self, acts: dict[str, Any], used: dict[str, np.ndarray], clipped: dict[str, int]
+    ) -> Move:
+        """The rest of an act move once the (disrupted) protagonist actions are known."""
         obs, reward, cost, terminated, truncated, info = self.task.step(acts)
         payoff = reward - self.cost_weight * cost
         self.last_reward = reward

@@ -163,6 +163,27 @@ def protagonist_action(
     return a
 
 
+def protagonist_rows(
+    agent: str, space: spaces.Space, shape: tuple[int, ...] | None, actions: Any
+) -> Sequence[Any]:
+    """`protagonist_action` of every row of `actions` (N games' actions), checked at once.
+
+    A stack ``[N, *shape]`` of finite values is converted to the space's dtype and checked in
+    one pass, and its rows are returned; anything else (a Discrete space, a ragged or
+    non-numeric batch, NaN) goes row by row, so each error names the row's own action.
+    """
+    if shape is not None:
+        try:
+            a = actions if type(actions) is np.ndarray else np.asarray(actions)
+            if a.dtype != space.dtype:
+                a = a.astype(space.dtype)
+        except (TypeError, ValueError):
+            a = None
+        if a is not None and a.shape == (len(actions), *shape) and all_finite(a):
+            return a  # type: ignore[return-value]  # an array is a sequence of its rows
+    return [protagonist_action(agent, space, shape, row) for row in actions]
+
+
 def _discrete_action(agent: str, space: Any, action: Any) -> np.int64:
     try:
         ok = np.ndim(action) == 0 and float(action) == int(action)

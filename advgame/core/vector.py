@@ -27,6 +27,8 @@ import numpy as np
 from gymnasium.vector import VectorEnv
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from advgame.core import lockstep
+from advgame.core.game import Move
 from advgame.core.policy import act_batch
 from advgame.core.views import SingleAgentView
 from advgame.errors import ConfigError
@@ -67,46 +69,79 @@ class VectorView(DummyVecEnv):
             )
         self.rewards = np.zeros(self.num_envs)
         """The last step's rewards in float64 (SB3's `VecEnv` returns them as float32)."""
+        self.agent: str = self.envs[0].agent
+        """The agent whose view this is."""
+        self._games = [view.game for view in self.envs]
+        self._alike = lockstep.alike(self._games)  # else each game plays its own moves
+        self._box = list(self.buf_obs) == [None]
 
     def step_wait(self) -> tuple[Any, np.ndarray, np.ndarray, list[dict]]:
         """Step every view with its action; autoreset finished views as `DummyVecEnv` does."""
-        views, actions = self.envs, self.actions
-        first = _others(views)
-        tallies = [view._decide(actions[i], first[i]) for i, view in enumerate(views)]
-        waiting = [i for i, v in enumerate(views) if v._waiting()]
+        views = self.envs
+        tallies: list[Any] = [None] * len(views)
+        for idx in lockstep.groups(self._games, range(len(views))):
+            for i, move in zip(idx, self._play(idx, self.actions), strict=True):
+                tallies[i] = views[i]._decided(move)
+        waiting = self._waiting(range(len(views)))
         while waiting:
-            sub = [views[i] for i in waiting]
-            for i, v, others in zip(waiting, sub, _others(sub), strict=True):
-                v._between(others, tallies[i])
-            waiting = [i for i in waiting if views[i]._waiting()]
-        infos = self.buf_infos
-        for i, view in enumerate(views):
-            obs, reward, terminated, truncated, info = view._finish(tallies[i])
-            self.buf_rews[i] = self.rewards[i] = reward
-            self.buf_dones[i] = terminated or truncated
+            for idx in lockstep.groups(self._games, waiting):
+                for i, move in zip(idx, self._play(idx), strict=True):
+                    views[i]._add(move, tallies[i])
+            waiting = self._waiting(waiting)
+        return self._results(tallies)
+
+    def _results(self, tallies: list[Any]) -> tuple[Any, np.ndarray, np.ndarray, list[dict]]:
+        """`DummyVecEnv`'s return of a step: finished views autoreset, their last obs in info."""
+        infos, rewards, dones = self.buf_infos, [], []
+        buf = self.buf_obs[None] if self._box else None  # type: ignore[index]  # SB3: Box at None
+        for i, (view, tally) in enumerate(zip(self.envs, tallies, strict=True)):
+            obs, reward, terminated, truncated, info = view._finish(tally)
+            done = terminated or truncated
             info["TimeLimit.truncated"] = truncated and not terminated
-            if self.buf_dones[i]:
+            if done:
                 info["terminal_observation"] = obs
                 obs, self.reset_infos[i] = view.reset()
             infos[i] = info
-            self._save_obs(i, obs)
+            if buf is not None:
+                buf[i] = obs
+            else:
+                self._save_obs(i, obs)
+            rewards.append(reward)
+            dones.append(done)
+        self.rewards[:] = self.buf_rews[:] = rewards
+        self.buf_dones[:] = dones
         # each info is a fresh dict of this step (`_finish`), so no deep copy is needed
         return self._obs_from_buf(), np.copy(self.buf_rews), np.copy(self.buf_dones), list(infos)
 
+    def _waiting(self, idx: Any) -> list[int]:
+        """The views of `idx` with moves to play before their learner decides (`_waiting`)."""
+        agent, games = self.agent, self._games
+        return [i for i in idx if games[i].agents and agent not in games[i].next_movers]
 
-def _others(views: Sequence[SingleAgentView]) -> list[dict[str, Any]]:
-    """The embedded policies' actions for each view's next move, batched per agent."""
-    groups: dict[str, list[tuple[int, Any, Any]]] = {}
-    for k, view in enumerate(views):
-        observe = view.game.observe
-        for agent, policy in view._players_now():
-            groups.setdefault(agent, []).append((k, policy, observe(agent)))
-    out: list[dict[str, Any]] = [{} for _ in views]
-    for agent, rows in groups.items():
-        actions = act_batch([r[1] for r in rows], [r[2] for r in rows])
-        for (k, _, _), action in zip(rows, actions, strict=True):
-            out[k][agent] = action
-    return out
+    def _play(self, idx: list[int], learner: Any = None) -> list[Move]:
+        """The next move of views `idx` (one `lockstep.groups` group); `learner`: all N actions.
+
+        Each embedded agent's policies are asked once for the group (`act_batch`).
+        """
+        views, games = self.envs, self._games
+        actions: dict[str, Any] = {}
+        for agent, _ in views[idx[0]]._players_now():  # the group's views share their movers
+            actions[agent] = act_batch(
+                [views[i].policies[agent] for i in idx], [games[i].observe(agent) for i in idx]
+            )
+        if learner is not None:
+            actions[self.agent] = learner if len(idx) == len(views) else [learner[i] for i in idx]
+        if self._alike:
+            return lockstep.play_all([games[i] for i in idx], actions)
+        return [
+            games[i].play({a: acts[k] for a, acts in actions.items()}) for k, i in enumerate(idx)
+        ]
+
+    def _obs_from_buf(self) -> Any:
+        """The observation buffer's copy (one array copy for a Box; SB3 deep-copies a dict)."""
+        if self._box:
+            return self.buf_obs[None].copy()  # type: ignore[index]  # SB3 keys a Box by None
+        return super()._obs_from_buf()
 
 
 class GymVectorView(VectorEnv):

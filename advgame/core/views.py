@@ -16,7 +16,7 @@ from typing import Any
 import gymnasium as gym
 
 from advgame.core.episodes import build_policies, reseed_policies
-from advgame.core.game import Game
+from advgame.core.game import Game, Move
 from advgame.errors import ConfigError
 
 __all__ = ["SingleAgentView", "view_factory"]
@@ -83,7 +83,7 @@ class SingleAgentView(gym.Env):
             _, infos = self.game.reset(seed=seed, options=options)
             info: dict[str, Any] = dict(infos[self.agent])
             while self.game.agents and self.agent not in self.game.next_movers:
-                self._play(self._others(), _Tally())
+                self.game.play(self._others())
             if self.game.agents:
                 return self.game.observe(self.agent), info
             seed = None  # the learner had no decision this episode; draw another
@@ -108,16 +108,19 @@ class SingleAgentView(gym.Env):
     def _decide(self, action: Any, others: dict[str, Any]) -> _Tally:
         """The learner's move; `others` holds the embedded policies' actions for it (`_players`)."""
         others[self.agent] = action
+        return self._decided(self.game.play(others))
+
+    def _decided(self, move: Move) -> _Tally:
+        """What the learner's own move starts its step's tally with."""
         if not self._protagonist:
             tally = _Tally()
-            self._play(others, tally)
+            self._add(move, tally)
             return tally
         # A protagonist's decision is one act move, and every move before its next decision is
         # a sense move, which adds nothing to its reward or info: nothing to sum here.
-        move = self.game.play(others)  # checks the learner's action is there, once per decision
         assert move.rewards is not None and move.costs is not None and move.info is not None
         info = dict(move.info)
-        get = info.get  # the task's info may hold these keys; `_play` adds to them
+        get = info.get  # the task's info may hold these keys; `_add` adds to them
         info["cost"] = get("cost", 0.0) + move.costs[self.agent]
         info["true_reward"] = get("true_reward", 0.0) + move.reward
         info["true_cost"] = get("true_cost", 0.0) + move.cost
@@ -130,7 +133,7 @@ class SingleAgentView(gym.Env):
             sensed = self.game._sense(others)  # only sense moves: all actions built here
             assert sensed.rewards is None, "only sense moves come between protagonist decisions"
         else:
-            self._play(others, tally)
+            self._add(self.game.play(others), tally)
 
     def _finish(self, tally: _Tally) -> tuple[Any, float, bool, bool, dict]:
         """The step's return once the learner is to decide again (or the episode ended)."""
@@ -141,8 +144,8 @@ class SingleAgentView(gym.Env):
         obs = self.game.observe(self.agent)
         return obs, tally.reward, tally.terminated, tally.truncated, tally.info
 
-    def _play(self, actions: dict[str, Any], tally: _Tally) -> None:
-        move = self.game.play(actions)
+    def _add(self, move: Move, tally: _Tally) -> None:
+        """Add a move the learner did not decide (or an adversary's own) to the step's tally."""
         info = tally.info
         if self.agent in move.clipped:
             info["clipped"] = info.get("clipped", 0) + move.clipped[self.agent]

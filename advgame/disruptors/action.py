@@ -17,7 +17,13 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 import numpy as np
 from gymnasium import spaces
 
-from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget, resolve_targets
+from advgame.disruptors.base import (
+    AdditiveDisruptor,
+    Disruptor,
+    DisruptorSpec,
+    as_budget,
+    resolve_targets,
+)
 from advgame.errors import BudgetError, ConfigError
 
 if TYPE_CHECKING:
@@ -116,6 +122,9 @@ class ActionRuntime(AdditiveDisruptor):
             blocks=[self.sizes[t] for t in targets],
         )
         self._plan = self._blocks()
+        self._flat = spec.mode in ("additive", "noisy") and all(
+            isinstance(space, spaces.Box) and len(space.shape) == 1 for _, _, space, _ in self._plan
+        )  # deterministic and whole 1-D Boxes: `action_rows` stacks them
 
     def encode(self, value: Any) -> np.ndarray:
         """Raw units -> adversary action: an offset (additive) or the adversary's own action."""
@@ -179,6 +188,36 @@ class ActionRuntime(AdditiveDisruptor):
                     new = adv if rng.random() < self.alpha else a
             # = np.clip(new, space.low, space.high), with less dispatch
             actions[t] = new.clip(*bounds).astype(space.dtype)
+
+    def action_rows(
+        self,
+        peers: Sequence[Disruptor],
+        actions: Sequence[dict[str, Any]],
+        u: Any,
+        rngs: Sequence[np.random.Generator],
+    ) -> None:
+        """`action` over N alike games at once (additive and noisy modes: no draws).
+
+        Every row gets exactly the single game's value (the same float64 arithmetic, clip and
+        cast); the probabilistic mode and Discrete actions draw from each game's own generator,
+        so each peer disrupts its own row.
+        """
+        if not (self._flat and isinstance(u, np.ndarray) and self._same_unit(peers)):
+            super().action_rows(peers, actions, u, rngs)
+            return
+        for t, block, space, bounds in self._plan:
+            b = u if block is None else u[:, block]
+            a = np.array([acts[t] for acts in actions])  # np.stack: same, slower
+            if a.dtype.kind != "f":  # as `action`: a non-float action enters as float64
+                a = a.astype(np.float64)
+            if self.mode == "additive":
+                new = a + b * (self.unit if block is None else self.unit[block])
+            else:
+                adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
+                new = (1.0 - self.alpha) * a.astype(np.float64) + self.alpha * adv
+            new = new.clip(*bounds).astype(space.dtype)
+            for acts, row in zip(actions, new, strict=True):
+                acts[t] = row
 
 
 def _size(space: spaces.Box | spaces.Discrete) -> int:

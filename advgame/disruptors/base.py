@@ -60,8 +60,8 @@ def all_finite(a: np.ndarray) -> bool:
 
 
 def in_unit_box(u: np.ndarray) -> bool:
-    """Whether every entry of the float array `u` lies in ``[-1, 1]`` (NaN does not)."""
-    return bool(np.maximum.reduce(np.abs(u), initial=0.0) <= 1.0)  # NaN propagates: False
+    """Whether every entry of the float array `u` (any shape) lies in ``[-1, 1]`` (NaN does not)."""
+    return bool(np.maximum.reduce(np.abs(u), axis=None, initial=0.0) <= 1.0)  # NaN: False
 
 
 def as_budget(value: float | Sequence[float], size: int, what: str) -> np.ndarray:
@@ -200,8 +200,33 @@ class Disruptor(abc.ABC):
             return u, 0
         return self._decode_slow(u)
 
+    def decode_rows(
+        self, peers: Sequence[Disruptor], actions: Any
+    ) -> tuple[np.ndarray | list[np.ndarray], list[int]]:
+        """``peers[i].decode(actions[i])`` for every ``i``, checked once over the batch.
+
+        `peers` are this disruptor's twins in N alike games (built from equal specs against
+        equal tasks; `advgame.core.lockstep`), this one among them. When the stacked actions
+        ``[N, size]`` are finite and inside the box (the common case) one test covers all
+        rows and they are returned as they are; otherwise each peer decodes its own row, so
+        errors, clips and each peer's ``clip_count`` are exactly those of one-by-one decoding.
+        Returns the decoded rows (a ``[N, size]`` array or a list) and the clip counts.
+        """
+        n = len(peers)
+        try:
+            u = np.asarray(actions, dtype=np.float64)
+        except (TypeError, ValueError):  # ragged or not numeric: the rows' own errors say why
+            u = None
+        if u is not None and u.shape == (n, *self.shape) and self._passes(u):
+            return u, [0] * n
+        decoded = [p.decode(a) for p, a in zip(peers, actions, strict=True)]
+        return [d[0] for d in decoded], [d[1] for d in decoded]
+
     def _passes(self, u: np.ndarray) -> bool:
-        """One cheap test that `u` decodes to itself with no clip (``False`` may be wrong)."""
+        """One cheap test that `u` (one action, or a batch of them) decodes to itself unclipped.
+
+        ``False`` may be wrong: `_decode_slow` then settles it.
+        """
         if not self.bounded:
             return all_finite(u)
         return self.norm == "linf" and in_unit_box(u)
@@ -272,6 +297,25 @@ class Disruptor(abc.ABC):
     def restore(self, sim: MujocoSim) -> None:  # noqa: B027 - an optional hook, no-op by default
         """Put every parameter this disruptor changed back to its nominal value."""
 
+    # -- the hooks over N alike games (`advgame.core.lockstep`): row by row unless overridden --
+    def observation_rows(
+        self, peers: Sequence[Disruptor], observations: Sequence[dict[str, Any]], u: Any
+    ) -> None:
+        """`observation` of ``observations[i]`` with ``u[i]`` by ``peers[i]``, for every ``i``."""
+        for p, obs, row in zip(peers, observations, u, strict=True):
+            p.observation(obs, row)
+
+    def action_rows(
+        self,
+        peers: Sequence[Disruptor],
+        actions: Sequence[dict[str, Any]],
+        u: Sequence[np.ndarray],
+        rngs: Sequence[np.random.Generator],
+    ) -> None:
+        """`action` of ``actions[i]`` with ``u[i]`` by ``peers[i]`` (game ``i``'s generator)."""
+        for p, acts, row, rng in zip(peers, actions, u, rngs, strict=True):
+            p.action(acts, row, rng)
+
 
 class AdditiveDisruptor(Disruptor):
     """A disruptor whose perturbation is ``unit * u``: `unit` maps normalized actions to raw units.
@@ -289,6 +333,7 @@ class AdditiveDisruptor(Disruptor):
     ) -> None:
         super().__init__(spec, int(unit.shape[0]), bounded=bounded, norm=norm, blocks=blocks)
         self.unit = unit.astype(np.float64)
+        self._peer_units: list[np.ndarray] = []  # the peers' units last found equal to ours
 
     def encode(self, value: Any) -> np.ndarray:
         """Perturbation in raw units -> normalized adversary action."""
@@ -300,8 +345,27 @@ class AdditiveDisruptor(Disruptor):
         return u.astype(np.float32)
 
     def perturbation(self, u: np.ndarray) -> np.ndarray:
-        """The raw perturbation a (decoded) action produces."""
+        """The raw perturbation a (decoded) action, or a batch ``[N, size]`` of them, produces."""
         return u if not self.bounded else u * self.unit
+
+    def _same_unit(self, peers: Sequence[Disruptor]) -> bool:
+        """Whether every peer maps actions to perturbations as this one does (cached).
+
+        `set_scale` (normalized-space budgets) gives a runtime a new `unit` array, so peers
+        whose arrays are the ones found equal last time still are.
+        """
+        if not self.bounded:  # the action is the perturbation: no unit to agree on
+            return True
+        cached = self._peer_units
+        if len(cached) == len(peers) and all(
+            getattr(p, "unit", None) is c for p, c in zip(peers, cached, strict=True)
+        ):
+            return True
+        units = [getattr(p, "unit", None) for p in peers]
+        if all(isinstance(x, np.ndarray) and np.array_equal(x, self.unit) for x in units):
+            self._peer_units = units  # type: ignore[assignment]
+            return True
+        return False
 
 
 def split_blocks(vec: np.ndarray, targets: Sequence[str], sizes: Mapping[str, int]) -> dict:

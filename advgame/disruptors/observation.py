@@ -207,6 +207,10 @@ class ObservationRuntime(AdditiveDisruptor):
             sizes += dict_obs.key_blocks(self.plans[t]) if t in self.plans else [dims[t].size]
         super().__init__(spec, self._unit(), bounded=spec.bounded, norm=spec.norm, blocks=sizes)
         self._plan = self._blocks()
+        self._flat = all(  # every target a whole 1-D Box: `observation_rows` stacks them
+            space is not None and full and len(space.shape) == 1
+            for _, _, full, space, _ in self._plan
+        )
 
     def _budget(self, spec: ObservationDisruptor, target: str) -> np.ndarray:
         if not spec.bounded:
@@ -278,10 +282,33 @@ class ObservationRuntime(AdditiveDisruptor):
                 new = np.array(obs, dtype=np.float64).reshape(-1)
                 new[self.dims[t]] += d
                 new = new.reshape(space.shape)
-            if bounds is not None:
-                new = new.clip(*bounds)  # = np.clip(new, space.low, space.high), less dispatch
-            if new.dtype != space.dtype:
-                new = (np.rint(new) if np.issubdtype(space.dtype, np.integer) else new).astype(
-                    space.dtype
-                )
-            observations[t] = new
+            observations[t] = _into(new, space, bounds)
+
+    def observation_rows(
+        self, peers: Sequence[Any], observations: Sequence[dict[str, Any]], u: Any
+    ) -> None:
+        """`observation` over N alike games at once: ``[N, dims]`` sums and clips per target.
+
+        Every row gets exactly the single game's value (the same float64 sum, clip and cast);
+        when the peers' budgets differ (e.g. another normalizer std) or an observation is not a
+        flat Box, each peer perturbs its own row.
+        """
+        if not (self._flat and isinstance(u, np.ndarray) and self._same_unit(peers)):
+            super().observation_rows(peers, observations, u)
+            return
+        delta = self.perturbation(u)
+        for t, block, _, space, bounds in self._plan:
+            assert space is not None  # `_flat`: every target a Box
+            new = np.array([obs[t] for obs in observations])  # np.stack: same, slower
+            new = _into(new + (delta if block is None else delta[:, block]), space, bounds)
+            for obs, row in zip(observations, new, strict=True):
+                obs[t] = row
+
+
+def _into(new: np.ndarray, space: spaces.Box, bounds: Bounds) -> np.ndarray:
+    """Perturbed observations (float64) clipped into `space` (its `bounds`) and cast to its dtype."""
+    if bounds is not None:
+        new = new.clip(*bounds)  # = np.clip(new, space.low, space.high), less dispatch
+    if new.dtype != space.dtype:
+        new = (np.rint(new) if np.issubdtype(space.dtype, np.integer) else new).astype(space.dtype)
+    return new
