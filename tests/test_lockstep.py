@@ -91,22 +91,13 @@ def _actions(game: advgame.Game, rng: np.random.Generator) -> dict[str, Any]:
 
 
 def _same(a: Any, b: Any, where: str) -> None:
-    if isinstance(a, dict):
-        assert a.keys() == b.keys(), where
-        for k in a:
-            _same(a[k], b[k], f"{where}[{k!r}]")
-    elif isinstance(a, tuple):
-        for i, (x, y) in enumerate(zip(a, b, strict=True)):
-            _same(x, y, f"{where}[{i}]")
-    elif isinstance(a, np.ndarray):
-        np.testing.assert_array_equal(a, b, err_msg=where, strict=True)
-    else:
-        assert a == b, (where, a, b)
+    np.testing.assert_equal(a, b, err_msg=where)  # dicts, tuples and arrays, recursively
 
 
 def _compare(mine: advgame.Game, ref: advgame.Game, where: str) -> None:
     for agent in mine.possible_agents:
-        _same(mine.observe(agent), ref.observe(agent), f"{where} observe {agent}")
+        got, want = mine.observe(agent), ref.observe(agent)
+        np.testing.assert_array_equal(got, want, err_msg=f"{where} observe {agent}", strict=True)
     for agent, d in mine.disruptors.items():
         assert d.clip_count == ref.disruptors[agent].clip_count, (where, agent)
     assert (mine.move, mine.next_movers, mine.t) == (ref.move, ref.next_movers, ref.t), where

@@ -75,6 +75,17 @@ def test_protagonist_views_in_lockstep_play_the_single_views_episodes() -> None:
     assert _play_both(fns, 150, seed=3) >= 2 * N  # random actions: several autoresets each
 
 
+def test_views_of_other_set_ups_step_game_by_game_and_still_play_their_own_episodes() -> None:
+    noise = {"observation_adversary": adv.GaussianAdversary(std=0.1)}
+    fns = [
+        view_factory("Hopper-v5", "protagonist", noise, preset="state-gauss-0.1"),
+        view_factory("Hopper-v5", "protagonist", noise, preset="default"),
+        view_factory("Hopper-v5", "protagonist", noise, preset="state-gauss-0.1"),
+    ]
+    assert not VectorView(fns)._alike  # two set-ups: no batched move, one lockstep loop
+    assert _play_both(fns, 100, seed=11) >= N
+
+
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory: pytest.TempPathFactory) -> SB3Checkpoint:
     """An (untrained, deterministic) PPO Hopper protagonist saved as a checkpoint."""

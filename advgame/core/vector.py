@@ -2,13 +2,16 @@
 
 `VectorView` is an SB3 `VecEnv` of N `SingleAgentView`s of one agent (protagonist or adversary),
 each with its own game and its own embedded opponent policies, exactly as a `DummyVecEnv` of the
-same views. What differs is the step: every view plays the same phases as
-`SingleAgentView.step` (the learner's move, the moves until its next decision, the result), but
-phase by phase across all N views, and before each move the embedded policies are asked for
-all views at once: the observations of every view in which agent ``a`` moves go to `act_batch`,
-which makes one call (one torch forward pass for a frozen SB3 network) when the N policies of
-``a`` share a `batch_key`, and one call per view otherwise (noise, whose per-view generators
-keep each view's draws its own).
+same views. What differs is the step: the views move phase by phase together (the learner's
+move, the moves until its next decision, the result, as in `SingleAgentView.step`), split into
+groups about to make the same move (`advgame.core.lockstep.groups`). Before each move the
+embedded policies are asked for the whole group at once: the observations of every view in
+which agent ``a`` moves go to `act_batch`, which makes one call (one torch forward pass for a
+frozen SB3 network) when the policies of ``a`` share a `batch_key`, and one call per view
+otherwise (noise, whose per-view generators keep each view's draws its own). When the views'
+games are alike (one scenario and set-up) the group's move is made by
+`advgame.core.lockstep.play_all`: each adversary's actions decoded, the perturbations applied
+and the protagonist's actions checked once over ``[N, ...]``; otherwise game by game.
 
 So every episode is the one N single views would play with the same seeds (``seed(s)`` gives
 view ``i`` the seed ``s + i`` as SB3 does; autoreset, ``terminal_observation``,

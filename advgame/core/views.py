@@ -92,8 +92,9 @@ class SingleAgentView(gym.Env):
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
         """One decision of the learner, then the moves until its next one (or the episode end).
 
-        `advgame.core.vector.VectorView` runs the same three phases (`_decide`, `_between`,
-        `_finish`) over N views in lockstep, batching the embedded policies' calls.
+        `advgame.core.vector.VectorView` runs the same phases over N views in lockstep (the
+        moves made by `advgame.core.lockstep.play_all`, then `_decided`, `_add`, `_finish`),
+        batching the embedded policies' calls.
         """
         tally = self._decide(action, self._others())
         while self._waiting():
