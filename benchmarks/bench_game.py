@@ -14,12 +14,14 @@ Four ways of stepping HalfCheetah-v5 with uniformly random actions (drawn before
 And, vectorised (``--n`` envs, default 8), per env step:
 
 * ``sync``: Gymnasium's ``SyncVectorEnv`` of ``n`` raw ``gymnasium.make("HalfCheetah-v5")``.
+* ``dummy``: a reference point, not part of advgame: SB3's ``DummyVecEnv`` of ``n`` raw envs
+  under the plain noise wrapper above (the cheapest conventional SB3 `VecEnv` with the noise).
 * ``vector``: `advgame.core.vector.VectorView` of ``n`` protagonist views as ``view`` above
   (an SB3 `VecEnv`; autoreset as `DummyVecEnv`).
 
 Each env is built once and stepped in many short segments (``--chunk`` env steps), interleaved
-raw, wrapper, view, parallel, sync, vector, raw, ... for ``--rounds`` rounds; episodes run on
-across segments. The vectorised pair is compared with each other (``vector`` / ``sync``).
+raw, wrapper, view, parallel, sync, dummy, vector, raw, ... for ``--rounds`` rounds; episodes run on
+across segments. The vectorised rows are compared with ``sync`` (``dummy`` / ``sync``, ``vector`` / ``sync``).
 On a shared or virtualised machine the speed of the whole machine drifts by tens of percent
 within seconds, so each segment is compared with the raw segment just before it: reported are
 the quartiles of those per-round ratios and the median extra time per step in µs.
@@ -86,12 +88,17 @@ def _parallel_runner(adv_obs: np.ndarray, adv_act: np.ndarray) -> Callable[[np.n
 
 
 def _vector_runners(n: int) -> dict[str, Callable[[np.ndarray], float]]:
-    """``sync`` and ``vector``: each steps `n` envs with ``actions[k : k + n]`` per step."""
+    """``sync``, ``dummy`` and ``vector``: each steps `n` envs with ``actions[k : k + n]`` per step."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
     from advgame.core.vector import VectorView
     from advgame.core.views import view_factory
 
     sync = gym.vector.SyncVectorEnv([functools.partial(gym.make, ENV) for _ in range(n)])
     sync.reset(seed=0)
+    dummy = DummyVecEnv([lambda: _NoiseWrapper(gym.make(ENV)) for _ in range(n)])
+    dummy.seed(0)
+    dummy.reset()
     noise = {"observation_adversary": GaussianAdversary(std=0.1)}
     fns = [view_factory(ENV, "protagonist", noise, preset="state-gauss-0.1") for _ in range(n)]
     vector = VectorView(fns)
@@ -107,6 +114,7 @@ def _vector_runners(n: int) -> dict[str, Callable[[np.ndarray], float]]:
 
     return {
         "sync": functools.partial(run, sync.step),
+        "dummy": functools.partial(run, dummy.step),
         "vector": functools.partial(run, vector.step),
     }
 
@@ -168,9 +176,11 @@ def report(seconds: dict[str, list[float]], chunk: int) -> dict[str, Any]:
         "view": "protagonist view + N(0,0.1)",
         "parallel": "ParallelEnv, obs+act advs",
     }
+    labels["dummy"] = "DummyVecEnv + plain wrapper (reference)"
     labels["vector"] = "VectorView + N(0,0.1), vs SyncVectorEnv"
     for key, label in labels.items():
-        t, base = np.asarray(seconds[key]), raw if key != "vector" else np.asarray(seconds["sync"])
+        vectorised = key in ("dummy", "vector")
+        t, base = np.asarray(seconds[key]), np.asarray(seconds["sync"]) if vectorised else raw
         q25, med, q75 = np.percentile(base / t, [25, 50, 75])
         extra = float(np.median((t - base) / chunk)) * 1e6
         goal = f"  (goal >= {GOALS[key]})" if key in GOALS else ""
