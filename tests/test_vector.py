@@ -146,9 +146,10 @@ def test_a_batched_forward_pass_gives_each_row_the_single_row_action(algo: str) 
     obs = rng.normal(size=(17, 11))
     rows = np.stack([policy.act(o) for o in obs])
     np.testing.assert_array_equal(policy.act_batch(obs), rows)
-    # ... and the single-row action is SB3's own deterministic `predict`
-    norm = np.clip((obs[0] - policy.mean) / policy.std, -10, 10).astype(np.float32)
-    np.testing.assert_array_equal(rows[0], model.predict(norm, deterministic=True)[0])
+    # ... and every single-row action is SB3's own deterministic `predict`
+    for o, row in zip(obs, rows, strict=True):
+        norm = np.clip((o - policy.mean) / policy.std, -10, 10).astype(np.float32)
+        np.testing.assert_array_equal(row, model.predict(norm, deterministic=True)[0])
     assert policy.batch_key is not None
     sampling = SB3Policy(model, deterministic=False).batch_key
     # only a PPO Gaussian samples in batches (the training loop's frozen opponents)

@@ -198,7 +198,7 @@ def _batched_actions(
             out[j0][a0] = policies[live[j0]][a0].act(obs0)
             continue
         head: Any = policies[live[j0]][a0]  # has act_batch: its batch key is not None
-        acts = head.act_batch(np.stack([r[2] for r in rows]))
+        acts = head.act_batch(np.array([r[2] for r in rows]))  # = np.stack, faster
         for (j, a, _), action in zip(rows, acts, strict=True):
             out[j][a] = action
     return out

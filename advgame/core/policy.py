@@ -167,13 +167,14 @@ def act_batch(policies: Sequence[Any], observations: Sequence[Any]) -> Sequence[
     are served by one `act_batch` call of the first (e.g. N views of one frozen SB3 network);
     any other policy is asked one observation at a time.
     """
+    if len(policies) == 1:
+        return [policies[0].act(observations[0])]
     head = policies[0]
     key = getattr(head, "batch_key", None)
     if (
-        len(policies) > 1
-        and key is not None
+        key is not None
         and hasattr(head, "act_batch")
         and all(getattr(p, "batch_key", None) == key for p in policies[1:])
     ):
-        return head.act_batch(np.stack(observations))
+        return head.act_batch(np.array(observations))  # = np.stack for equal shapes, faster
     return [p.act(o) for p, o in zip(policies, observations, strict=True)]

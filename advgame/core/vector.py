@@ -81,6 +81,8 @@ class VectorView(DummyVecEnv):
     def step_wait(self) -> tuple[Any, np.ndarray, np.ndarray, list[dict]]:
         """Step every view with its action; autoreset finished views as `DummyVecEnv` does."""
         views = self.envs
+        if len(views) == 1:  # one view: its own step is the lockstep of one
+            return self._results([views[0].step(self.actions[0])])
         tallies: list[Any] = [None] * len(views)
         for idx in lockstep.groups(self._games, range(len(views))):
             for i, move in zip(idx, self._play(idx, self.actions), strict=True):
@@ -91,14 +93,15 @@ class VectorView(DummyVecEnv):
                 for i, move in zip(idx, self._play(idx), strict=True):
                     views[i]._add(move, tallies[i])
             waiting = self._waiting(waiting)
-        return self._results(tallies)
+        return self._results([view._finish(t) for view, t in zip(views, tallies, strict=True)])
 
-    def _results(self, tallies: list[Any]) -> tuple[Any, np.ndarray, np.ndarray, list[dict]]:
-        """`DummyVecEnv`'s return of a step: finished views autoreset, their last obs in info."""
+    def _results(self, steps: list[tuple]) -> tuple[Any, np.ndarray, np.ndarray, list[dict]]:
+        """`DummyVecEnv`'s return of the views' `steps` (finished views autoreset)."""
         infos, rewards, dones = self.buf_infos, [], []
         buf = self.buf_obs[None] if self._box else None  # type: ignore[index]  # SB3: Box at None
-        for i, (view, tally) in enumerate(zip(self.envs, tallies, strict=True)):
-            obs, reward, terminated, truncated, info = view._finish(tally)
+        for i, (view, (obs, reward, terminated, truncated, info)) in enumerate(
+            zip(self.envs, steps, strict=True)
+        ):
             done = terminated or truncated
             info["TimeLimit.truncated"] = truncated and not terminated
             if done:

@@ -145,6 +145,7 @@ class SB3Policy:
         self._squash = False
         self._head: Any = None
         self._sampler: Any = None
+        self._key: tuple | None = None
         self._stats = (obs_mean, obs_var)
 
     @property
@@ -167,10 +168,7 @@ class SB3Policy:
         cover, or a sampling policy other than a PPO Gaussian.
         """
         self._prepare()
-        if (self._head if self.deterministic else self._sampler) is None:
-            return None  # no lean forward pass (or a sampling non-PPO policy): act row by row
-        stats = (id(self._stats[0]), id(self._stats[1]), self.clip_obs)
-        return (id(self.model), *stats, self.deterministic)
+        return self._key
 
     def act(self, observation: Any) -> Any:
         """The policy's action for one raw observation.
@@ -208,7 +206,8 @@ class SB3Policy:
 
     def _normalize(self, obs: np.ndarray) -> np.ndarray:
         if self.mean is not None and self.std is not None:
-            obs = np.clip((obs - self.mean) / self.std, -self.clip_obs, self.clip_obs)
+            # ndarray.clip: np.clip's ufunc without its dispatch layer (same values)
+            obs = ((obs - self.mean) / self.std).clip(-self.clip_obs, self.clip_obs)
         return obs.astype(np.float32, copy=False)
 
     def _prepare(self) -> None:
@@ -226,6 +225,10 @@ class SB3Policy:
         self._head = forward if self.deterministic else None
         gaussian = forward is not None and forward.kind == "mean" and hasattr(policy, "log_std")
         self._sampler = forward if gaussian and hasattr(policy, "mlp_extractor") else None
+        self._key = None  # no lean forward pass: act row by row
+        if (self._head if self.deterministic else self._sampler) is not None:
+            stats = (id(self._stats[0]), id(self._stats[1]), self.clip_obs)
+            self._key = (id(self.model), *stats, self.deterministic)
         self._ready = True
 
     def _predict(self, obs: np.ndarray) -> Any:
@@ -244,16 +247,15 @@ class SB3Policy:
         if self._head is not None:
             action = self._head(x)
         elif self._sampler is not None:  # SB3's Gaussian sample, the same draws for one row
-            with torch.no_grad():
-                mean = self._sampler(x)
-                action = mean + torch.randn(mean.shape) * policy.log_std.exp()
+            mean = self._sampler(x)  # under no_grad inside
+            action = mean + torch.randn(mean.shape) * policy.log_std.detach().exp()
         else:
             with torch.no_grad():
                 rows = [policy._predict(x[i : i + 1], self.deterministic) for i in range(len(x))]
             action = torch.cat(rows)
         out = action.cpu().numpy()
         if self._box is not None:
-            out = policy.unscale_action(out) if self._squash else np.clip(out, *self._box)
+            out = policy.unscale_action(out) if self._squash else out.clip(*self._box)
         return out
 
     # -- white-box access (`advgame.core.policy.WhiteBox`): forward passes only, nothing trained ----

@@ -74,6 +74,8 @@ class ActorForward:
         self.layers, self.kind = layers, kind
         self._batched: dict[int, bool] = {}
         self._layers = self._modules()[1:]  # the flatten extractor is `__call__`'s flatten(1)
+        self._ops = [(_op(layer), layer, layer._parameters) for layer in self._layers]
+        self._expanded: dict[tuple[int, int], tuple[Any, Any, Any, Any]] = {}
         with torch.no_grad():
             for layer in self._layers:
                 if type(layer).__name__ == "Linear":
@@ -106,25 +108,73 @@ class ActorForward:
                 out.append(layer)
         return out
 
-    def __call__(self, obs: Any) -> Any:
-        """Deterministic actions for the batch `obs` (before SB3's clipping or unscaling)."""
+    def _linear_rows(self, layer: Any, weight: Any, bias: Any, x: Any) -> Any:
+        """`_batched_linear` of `layer` with its operands' ``[n, ...]`` views kept per n.
+
+        Views, not copies: they follow the parameters' in-place updates; a new parameter
+        object (a layer given new weights) builds them again.
+        """
         import torch
 
-        x, n = obs.flatten(1), obs.shape[0]  # the flatten feature extractor
+        n = x.shape[0]
+        key = (id(layer), n)
+        cached = self._expanded.get(key)
+        if cached is None or cached[0] is not weight or cached[1] is not bias:
+            w = weight.T.expand(n, -1, -1)
+            b = None if bias is None else bias.expand(n, 1, -1)
+            cached = self._expanded[key] = (weight, bias, w, b)
+        _, _, w, b = cached
+        if b is None:
+            return torch.bmm(x[:, None, :], w)[:, 0]
+        return torch.baddbmm(b, x[:, None, :], w)[:, 0]
+
+    def __call__(self, obs: Any) -> Any:
+        """Deterministic actions for the batch `obs` (before SB3's clipping or unscaling).
+
+        Layers run as the functions their ``forward`` calls (``F.linear`` with the layer's
+        own parameters, ``torch.tanh``, ``torch.relu``): the same kernels on the same tensors,
+        so the same bits, without ``nn.Module.__call__``'s hook machinery, which costs as much
+        as the arithmetic for these small networks.
+        """
+        import torch
+        from torch.nn import functional
+
+        x = obs if obs.ndim == 2 else obs.flatten(1)  # the flatten feature extractor
+        n = x.shape[0]
         with torch.no_grad():
-            for layer in self._layers:
-                batched = self._batched.get(id(layer)) if n > 1 else None
-                if batched is None:  # one row, or an element-wise layer
+            for op, layer, params in self._ops:
+                if op == "linear":  # `params` is the layer's own dict: it sees new weights
+                    batched = self._batched[id(layer)] if n > 1 else None
+                    w, b = params["weight"], params["bias"]
+                    if batched is None:  # one row
+                        x = functional.linear(x, w, b)
+                    elif batched:
+                        x = self._linear_rows(layer, w, b, x)
+                    else:
+                        x = torch.cat([functional.linear(x[i : i + 1], w, b) for i in range(n)])
+                elif op == "tanh":
+                    x = torch.tanh(x)
+                elif op == "relu":
+                    x = torch.relu(x)
+                elif op == "module":
                     x = layer(x)
-                elif batched:
-                    x = _batched_linear(layer, x)
-                else:
-                    x = torch.cat([layer(x[i : i + 1]) for i in range(n)])
         if self.kind == "tanh":
             return torch.tanh(x)
         if self.kind == "argmax":
             return torch.argmax(x, dim=1)
         return x
+
+
+def _op(layer: Any) -> str:
+    """How `ActorForward.__call__` runs `layer`: as the function its ``forward`` calls."""
+    name = type(layer).__name__
+    if name == "Linear":
+        return "linear"
+    if name == "Tanh":
+        return "tanh"
+    if name == "ReLU" and not layer.inplace:
+        return "relu"
+    return "identity" if name == "Identity" else "module"
 
 
 def actor_head(policy: Any) -> tuple[list[Any], str] | None:

@@ -54,19 +54,21 @@ class EpisodeStats:
 
         class _Callback(BaseCallback):
             def _init_callback(self) -> None:
-                self._acc = np.zeros(self.training_env.num_envs)
-                self._cost = np.zeros(self.training_env.num_envs)
+                # per-env sums in Python floats: a numpy element update costs more than the add
+                self._acc = [0.0] * self.training_env.num_envs
+                self._cost = [0.0] * self.training_env.num_envs
 
             def _on_step(self) -> bool:
                 infos, dones = self.locals["infos"], self.locals["dones"]
+                acc, cost = self._acc, self._cost
                 for i, info in enumerate(infos):
-                    self._acc[i] += info.get("true_reward", 0.0)
-                    self._cost[i] += info.get("true_cost", 0.0)
+                    acc[i] += info.get("true_reward", 0.0)
+                    cost[i] += info.get("true_cost", 0.0)
                     stats.clipped += int(info.get("clipped", 0))
                     if dones[i]:
-                        stats.true_returns.append(float(self._acc[i]))
-                        stats.true_costs.append(float(self._cost[i]))
-                        self._acc[i] = self._cost[i] = 0.0
+                        stats.true_returns.append(float(acc[i]))
+                        stats.true_costs.append(float(cost[i]))
+                        acc[i] = cost[i] = 0.0
                 if stats.progress is not None:
                     stats.progress.update(len(infos))
                 return True
