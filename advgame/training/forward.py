@@ -32,14 +32,18 @@ class _Unsupported(Exception):
     """A layer this forward pass does not reproduce exactly."""
 
 
-def _batched_linear(module: Any, x: Any) -> Any:
+def _operands(weight: Any, bias: Any, n: int) -> tuple[Any, Any]:
+    """A linear layer's weight and bias as ``[n, ...]`` views for `_batched_linear`."""
+    return weight.T.expand(n, -1, -1), None if bias is None else bias.expand(n, 1, -1)
+
+
+def _batched_linear(weight: Any, bias: Any, x: Any) -> Any:
+    """``x @ W.T + b`` as a batch of one-row products, with `_operands`' views."""
     import torch
 
-    n = x.shape[0]
-    weight = module.weight.T.expand(n, -1, -1)
-    if module.bias is None:
+    if bias is None:
         return torch.bmm(x[:, None, :], weight)[:, 0]
-    return torch.baddbmm(module.bias.expand(n, 1, -1), x[:, None, :], weight)[:, 0]
+    return torch.baddbmm(bias, x[:, None, :], weight)[:, 0]
 
 
 def _reproduces(module: Any) -> bool:
@@ -54,7 +58,8 @@ def _reproduces(module: Any) -> bool:
     for n in _PROBE_SIZES:
         x = torch.randn(n, module.in_features, generator=gen)
         rows = torch.cat([module(x[i : i + 1]) for i in range(n)])
-        if not torch.equal(_batched_linear(module, x), rows):
+        batched = _batched_linear(*_operands(module.weight, module.bias, n), x)
+        if not torch.equal(batched, rows):
             return False
     return True
 
@@ -109,24 +114,17 @@ class ActorForward:
         return out
 
     def _linear_rows(self, layer: Any, weight: Any, bias: Any, x: Any) -> Any:
-        """`_batched_linear` of `layer` with its operands' ``[n, ...]`` views kept per n.
+        """`_batched_linear` of `layer`, with its `_operands` kept per batch size.
 
-        Views, not copies: they follow the parameters' in-place updates; a new parameter
-        object (a layer given new weights) builds them again.
+        They are views, not copies: they follow the parameters' in-place updates, and a new
+        parameter object (a layer given new weights) builds them again.
         """
-        import torch
-
         n = x.shape[0]
         key = (id(layer), n)
         cached = self._expanded.get(key)
         if cached is None or cached[0] is not weight or cached[1] is not bias:
-            w = weight.T.expand(n, -1, -1)
-            b = None if bias is None else bias.expand(n, 1, -1)
-            cached = self._expanded[key] = (weight, bias, w, b)
-        _, _, w, b = cached
-        if b is None:
-            return torch.bmm(x[:, None, :], w)[:, 0]
-        return torch.baddbmm(b, x[:, None, :], w)[:, 0]
+            cached = self._expanded[key] = (weight, bias, *_operands(weight, bias, n))
+        return _batched_linear(cached[2], cached[3], x)
 
     def __call__(self, obs: Any) -> Any:
         """Deterministic actions for the batch `obs` (before SB3's clipping or unscaling).
