@@ -156,9 +156,9 @@ def rollout_batch(
     live = [k for k, game in enumerate(games) if game.agents]
     while live:
         actions = dict(zip(live, _batched_actions(games, policies, keys, live), strict=True))
-        for idx in lockstep.groups(games, live) if same else [[k] for k in live]:
+        for idx in lockstep.groups(games, live):
             agents = actions[idx[0]]  # one group: the same movers
-            moves = lockstep.play_all(
+            moves = (lockstep.play_all if same else lockstep.play_each)(
                 [games[k] for k in idx], {a: [actions[k][a] for k in idx] for a in agents}
             )
             for k, move in zip(idx, moves, strict=True):

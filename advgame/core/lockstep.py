@@ -33,7 +33,7 @@ from typing import Any
 from advgame.core.game import Game
 from advgame.core.moves import ACT, SENSE, Move, protagonist_rows
 
-__all__ = ["alike", "groups", "play_all"]
+__all__ = ["alike", "groups", "play_all", "play_each"]
 
 
 def alike(games: Sequence[Game]) -> bool:
@@ -81,11 +81,19 @@ def play_all(games: Sequence[Game], actions: Mapping[str, Sequence[Any]]) -> lis
     """
     g0 = games[0]
     if len(games) == 1 or g0._setup_pending:  # the setup move (t = 0) is played game by game
-        return [g.play({a: acts[i] for a, acts in actions.items()}) for i, g in enumerate(games)]
+        return play_each(games, actions)
     g0.require(actions.keys())
     if g0.move == SENSE:
         return _sense_all(games, actions)
     return _act_all(games, actions)
+
+
+def play_each(games: Sequence[Game], actions: Mapping[str, Sequence[Any]]) -> list[Move]:
+    """``[games[i].play({a: actions[a][i] for a in actions}) for i ...]``, game by game.
+
+    The unbatched form of `play_all`, for games that are not alike.
+    """
+    return [g.play({a: acts[i] for a, acts in actions.items()}) for i, g in enumerate(games)]
 
 
 def _decode_all(

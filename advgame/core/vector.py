@@ -120,9 +120,9 @@ class VectorView(DummyVecEnv):
         return self._obs_from_buf(), np.copy(self.buf_rews), np.copy(self.buf_dones), list(infos)
 
     def _waiting(self, idx: Any) -> list[int]:
-        """The views of `idx` with moves to play before their learner decides (`_waiting`)."""
-        agent, games = self.agent, self._games
-        return [i for i in idx if games[i].agents and agent not in games[i].next_movers]
+        """The views of `idx` with moves to play before their learner decides."""
+        views = self.envs
+        return [i for i in idx if views[i]._waiting()]
 
     def _play(self, idx: list[int], learner: Any = None) -> list[Move]:
         """The next move of views `idx` (one `lockstep.groups` group); `learner`: all N actions.
@@ -137,11 +137,8 @@ class VectorView(DummyVecEnv):
             )
         if learner is not None:
             actions[self.agent] = learner if len(idx) == len(views) else [learner[i] for i in idx]
-        if self._alike:
-            return lockstep.play_all([games[i] for i in idx], actions)
-        return [
-            games[i].play({a: acts[k] for a, acts in actions.items()}) for k, i in enumerate(idx)
-        ]
+        play = lockstep.play_all if self._alike else lockstep.play_each
+        return play([games[i] for i in idx], actions)
 
     def _obs_from_buf(self) -> Any:
         """The observation buffer's copy (one array copy for a Box; SB3 deep-copies a dict)."""

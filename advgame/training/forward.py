@@ -68,23 +68,25 @@ class ActorForward:
     """The deterministic actor of one SB3 policy, batch-invariant (see the module docstring).
 
     Build it with `ActorForward.of` (None for an actor it does not cover); call it on a float32
-    batch ``[n, obs]`` under ``no_grad``. One row runs the policy's own modules; more rows run
-    each linear layer as one batched product where that reproduces the one-row result (probed
-    per layer), else row by row.
+    batch ``[n, obs]``. One row runs each layer as the function its ``forward`` calls; more rows
+    run each linear layer as one batched product where that reproduces the one-row result
+    (probed per layer), else row by row.
     """
 
     def __init__(self, layers: list[Any], kind: str) -> None:
         import torch
 
         self.layers, self.kind = layers, kind
-        self._batched: dict[int, bool] = {}
-        self._layers = self._modules()[1:]  # the flatten extractor is `__call__`'s flatten(1)
-        self._ops = [(_op(layer), layer, layer._parameters) for layer in self._layers]
-        self._expanded: dict[tuple[int, int], tuple[Any, Any, Any, Any]] = {}
+        # per layer: how `__call__` runs it, the layer, its own parameter dict (it sees new
+        # weights), and for a linear layer whether one batched product reproduces its rows
+        self._ops: list[tuple[str, Any, Any, bool]] = []
         with torch.no_grad():
-            for layer in self._layers:
-                if type(layer).__name__ == "Linear":
-                    self._batched[id(layer)] = _reproduces(layer)
+            for layer in self._modules()[1:]:  # the flatten extractor is `__call__`'s flatten
+                op = _op(layer)
+                self._ops.append(
+                    (op, layer, layer._parameters, op == "linear" and _reproduces(layer))
+                )
+        self._expanded: dict[tuple[int, int], tuple[Any, Any, Any, Any]] = {}
 
     @classmethod
     def of(cls, policy: Any) -> ActorForward | None:
@@ -140,13 +142,12 @@ class ActorForward:
         x = obs if obs.ndim == 2 else obs.flatten(1)  # the flatten feature extractor
         n = x.shape[0]
         with torch.no_grad():
-            for op, layer, params in self._ops:
-                if op == "linear":  # `params` is the layer's own dict: it sees new weights
-                    batched = self._batched[id(layer)] if n > 1 else None
+            for op, layer, params, batches in self._ops:
+                if op == "linear":
                     w, b = params["weight"], params["bias"]
-                    if batched is None:  # one row
+                    if n <= 1:  # one row
                         x = functional.linear(x, w, b)
-                    elif batched:
+                    elif batches:
                         x = self._linear_rows(layer, w, b, x)
                     else:
                         x = torch.cat([functional.linear(x[i : i + 1], w, b) for i in range(n)])
