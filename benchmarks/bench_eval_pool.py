@@ -39,25 +39,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import step_through
+from _common import make_checkpoints, step_through
 
 from advgame.evaluation import AdversarySetup, PayoffTable, evaluate, population_jobs
-from advgame.training.checkpoint import SB3Checkpoint
 
 ENV = "HalfCheetah-v5"
-
-
-def make_checkpoints(folder: Path) -> dict[str, SB3Checkpoint]:
-    import gymnasium as gym
-    from stable_baselines3 import PPO
-
-    out = {}
-    for seed in (1, 2):
-        model = PPO("MlpPolicy", gym.make(ENV), seed=seed, device="cpu")
-        path = folder / f"ppo_{seed}.zip"
-        model.save(path)
-        out[f"ppo-init-{seed}"] = SB3Checkpoint(str(path), algo="ppo")
-    return out
 
 
 def adversaries() -> dict[str, AdversarySetup]:
@@ -138,7 +124,7 @@ def main() -> None:
     wall: dict[int, list[float]] = {1: [], 2: []}
     est, ceilings = [], []
     with tempfile.TemporaryDirectory() as tmp:
-        jobs = population_jobs(ENV, make_checkpoints(Path(tmp)), adversaries(), seeds=seeds,
+        jobs = population_jobs(ENV, make_checkpoints(Path(tmp), ENV), adversaries(), seeds=seeds,
                                episodes=args.episodes)  # fmt: skip
         for r in range(args.rounds):
             (one, t1, c1), (two, t2, c2) = (timed(jobs, w, args.start_method) for w in (1, 2))

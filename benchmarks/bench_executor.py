@@ -29,25 +29,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _common import make_checkpoints
 
 from advgame.evaluation import AdversarySetup, evaluate, population_jobs
 from advgame.evaluation.executor import UnitRecord, run_units
-from advgame.training.checkpoint import SB3Checkpoint
 
 ENV = "HalfCheetah-v5"
 VARIANTS = (("local", 1), ("ray", 1), ("local", 2), ("ray", 2))
-
-
-def make_checkpoints(folder: Path) -> dict[str, SB3Checkpoint]:
-    import gymnasium as gym
-    from stable_baselines3 import PPO
-
-    out = {}
-    for seed in (1, 2):
-        path = folder / f"ppo_{seed}.zip"
-        PPO("MlpPolicy", gym.make(ENV), seed=seed, device="cpu").save(path)
-        out[f"ppo-init-{seed}"] = SB3Checkpoint(str(path), algo="ppo")
-    return out
 
 
 def columns() -> dict[str, AdversarySetup]:
@@ -102,7 +90,9 @@ def main() -> None:
         v: [] for v in VARIANTS
     }
     with tempfile.TemporaryDirectory() as tmp:
-        jobs = population_jobs(ENV, make_checkpoints(Path(tmp)), columns(), seeds=range(args.seeds))
+        jobs = population_jobs(
+            ENV, make_checkpoints(Path(tmp), ENV), columns(), seeds=range(args.seeds)
+        )
         jobs = [j.__class__(**{**j.__dict__, "make_kwargs": {**j.make_kwargs, "max_episode_steps": args.steps}})
                 for j in jobs]  # fmt: skip
         reference = None

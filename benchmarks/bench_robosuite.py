@@ -18,11 +18,12 @@ same round — robust to the machine's drift. Run: ``python benchmarks/bench_rob
 from __future__ import annotations
 
 import argparse
+import functools
 import time
 from typing import Any
 
 import numpy as np
-from _common import ratio_row
+from _common import ratio_table, raw_vs_game
 
 import advgame
 
@@ -46,23 +47,6 @@ def _time_raw(env: Any, actions: np.ndarray) -> float:
     return time.perf_counter() - start
 
 
-def _time_game(game: advgame.Game, actions: np.ndarray, rng: np.random.Generator) -> float:
-    adv = {
-        a: rng.uniform(-1, 1, (len(actions), *game.action_space(a).shape)) for a in game.adversaries
-    }
-    size = game.action_space("protagonist").shape[0]
-    start, i = time.perf_counter(), 0
-    while i < len(actions):
-        if not game.agents:
-            game.reset()
-        move = {a: adv[a][i].astype(np.float32) for a in game.next_movers if a in adv}
-        if "protagonist" in game.next_movers:
-            move["protagonist"] = actions[i][:size]
-            i += 1
-        game.play(move)
-    return time.perf_counter() - start
-
-
 def bench(sid: str, steps: int, rounds: int, seed: int) -> dict[str, list[float]]:
     """Steps/s of each variant of `sid` in `rounds` interleaved rounds of `steps` steps."""
     rng = np.random.default_rng(seed)
@@ -72,13 +56,8 @@ def bench(sid: str, steps: int, rounds: int, seed: int) -> dict[str, list[float]
     attacked = advgame.make(sid, preset="default", max_episode_steps=HORIZON)
     for g in (plain, attacked):
         g.reset(seed=seed)
-    out: dict[str, list[float]] = {"raw": [], "game": [], "game+adv": []}
-    for _ in range(rounds):
-        actions = rng.uniform(-1, 1, (steps, dim))
-        out["raw"].append(steps / _time_raw(env, actions))
-        out["game"].append(steps / _time_game(plain, actions, rng))
-        out["game+adv"].append(steps / _time_game(attacked, actions, rng))
-    return out
+    draw = functools.partial(rng.uniform, -1, 1, (steps, dim))
+    return raw_vs_game(functools.partial(_time_raw, env), plain, attacked, draw, rounds, rng)
 
 
 def main() -> None:
@@ -92,17 +71,7 @@ def main() -> None:
     warm = advgame.make(ids[0], disruptors=[])
     warm.reset(seed=0)
     warm.play({"protagonist": warm.action_space("protagonist").sample()})  # numba compiles here
-    lines = [
-        f"{args.rounds} interleaved rounds of {args.steps} steps; raw: median steps/s; "
-        "game, game+adv: median per-round ratio to raw (quartiles)",
-        "| scenario | raw steps/s | game / raw | game+adv / raw |",
-        "|---|---|---|---|",
-    ]
-    for sid in ids:
-        r = bench(sid, args.steps, args.rounds, 0)
-        lines.append(ratio_row(sid, r))
-        print(lines[-1], flush=True)
-    print("\n".join(lines))
+    ratio_table("scenario", ids, bench, args.steps, args.rounds)
 
 
 if __name__ == "__main__":

@@ -19,10 +19,10 @@ in the same round — robust to the machine's drift. Run: ``python benchmarks/be
 from __future__ import annotations
 
 import argparse
-import time
+import functools
 
 import numpy as np
-from _common import ratio_row, step_through
+from _common import ratio_table, raw_vs_game, step_through
 
 import advgame
 
@@ -36,23 +36,6 @@ TASKS = (
 """One task per family: maze, fetch, hand, adroit, kitchen."""
 
 
-def _time_game(game: advgame.Game, actions: np.ndarray, rng: np.random.Generator) -> float:
-    adv = {
-        a: rng.uniform(-1, 1, (len(actions), *game.action_space(a).shape)).astype(np.float32)
-        for a in game.adversaries
-    }
-    start, i = time.perf_counter(), 0
-    while i < len(actions):
-        if not game.agents:
-            game.reset()
-        move = {a: adv[a][i] for a in game.next_movers if a in adv}
-        if "protagonist" in game.next_movers:
-            move["protagonist"] = actions[i]
-            i += 1
-        game.play(move)
-    return time.perf_counter() - start
-
-
 def bench(sid: str, steps: int, rounds: int, seed: int) -> dict[str, list[float]]:
     """Steps/s of each variant of `sid` in `rounds` interleaved rounds of `steps` steps."""
     rng = np.random.default_rng(seed)
@@ -63,13 +46,11 @@ def bench(sid: str, steps: int, rounds: int, seed: int) -> dict[str, list[float]
     for g in (plain, attacked):
         g.reset(seed=seed)
     space = plain.action_space("protagonist")
-    out: dict[str, list[float]] = {"raw": [], "game": [], "game+adv": []}
-    for _ in range(rounds):
-        actions = rng.uniform(space.low, space.high, (steps, *space.shape)).astype(space.dtype)
-        out["raw"].append(steps / step_through(raw, actions))
-        out["game"].append(steps / _time_game(plain, actions, rng))
-        out["game+adv"].append(steps / _time_game(attacked, actions, rng))
-    return out
+
+    def draw() -> np.ndarray:
+        return rng.uniform(space.low, space.high, (steps, *space.shape)).astype(space.dtype)
+
+    return raw_vs_game(functools.partial(step_through, raw), plain, attacked, draw, rounds, rng)
 
 
 def main() -> None:
@@ -79,17 +60,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=15)
     parser.add_argument("--only", nargs="*", default=None)
     args = parser.parse_args()
-    lines = [
-        f"{args.rounds} interleaved rounds of {args.steps} steps; raw: median steps/s; "
-        "game, game+adv: median per-round ratio to raw (quartiles)",
-        "| task | raw steps/s | game / raw | game+adv / raw |",
-        "|---|---|---|---|",
-    ]
-    for sid in args.only or TASKS:
-        r = bench(sid, args.steps, args.rounds, 0)
-        lines.append(ratio_row(sid, r))
-        print(lines[-1], flush=True)
-    print("\n".join(lines))
+    ratio_table("task", args.only or TASKS, bench, args.steps, args.rounds)
 
 
 if __name__ == "__main__":
