@@ -92,6 +92,21 @@ class _Attack:
         """The attack for observation adversary `info.agent` (attached to its victims later)."""
         return WhiteBoxAttackPolicy(self, info)
 
+    def unplayable(self, game: Game, agent: str, victims: Mapping[str, Any]) -> str | None:
+        """Why this attack cannot play `agent` of `game` against `victims`, or None if it can.
+
+        What `advgame.evaluation.applicable` asks before a table runs: the attack is built and
+        attached as in a real episode, and the `ConfigError` its attaching would raise is the
+        reason. A column that cannot work for any row (not an observation adversary, no
+        budget) raises here instead.
+        """
+        policy = self.build(game.agent_info(agent))
+        try:
+            policy.attach(game, victims)
+        except ConfigError as exc:
+            return str(exc)
+        return None
+
 
 @dataclass(frozen=True, kw_only=True)
 class MADAttack(_Attack):

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from advgame.errors import ConfigError
+from advgame.evaluation.applicable import not_applicable
 from advgame.evaluation.batched import LOCKSTEP_EPISODES
 from advgame.evaluation.columns import COLUMN_KINDS, adversary_columns, describe_column
 from advgame.evaluation.executor import EXECUTORS, first_action, run_units, write_timings
@@ -86,6 +87,7 @@ __all__ = [
     "evaluate",
     "evaluate_policies",
     "lockstep_groups",
+    "not_applicable",
     "population_jobs",
     "run_job",
     "run_protagonist",
@@ -220,6 +222,10 @@ def evaluate(
 ) -> PayoffTable:
     """Run `jobs`; return their rows, in job order (whatever the workers), as a `PayoffTable`.
 
+    First every column is asked whether it can play its row (`not_applicable`): cells it
+    cannot play (a white-box attack against a fixed controller) are not run and are recorded
+    in the table's `PayoffTable.not_applicable` with the reason, before any job is queued.
+
     In this process (local, one worker) consecutive jobs are grouped by up to
     `LOCKSTEP_EPISODES` episodes (`lockstep_groups`) and every group is one unit, all its
     episodes played in lockstep with batched policy calls across jobs; a pool or Ray gets
@@ -253,6 +259,10 @@ def evaluate(
     if type(workers) is not int or workers < 1:
         raise ConfigError(f"workers must be an int >= 1, got {workers!r}.")
     kind, address = (executor, address) if executor is not None else _DEFAULT_EXECUTOR
+    na = not_applicable(jobs)
+    if na:
+        log.info("%d cell(s) not applicable, not played: %s", len(na), sorted(na))
+        jobs = [j for j in jobs if (j.protagonist, j.adversary) not in na]
     units: list[Any] = (
         list(lockstep_groups(jobs, LOCKSTEP_EPISODES))
         if kind == "local" and workers == 1
@@ -268,7 +278,7 @@ def evaluate(
                             ship_files=ship_files, start_method=start_method, progress=bar)  # fmt: skip
     if out is not None:
         write_timings(records, out / "jobs.jsonl")
-    return PayoffTable(row for rec in records for row in rec.value)
+    return PayoffTable((row for rec in records for row in rec.value), na)
 
 
 _DEFAULT_EXECUTOR: tuple[str, str | None] = ("local", None)

@@ -18,10 +18,21 @@ import numpy as np
 
 from advgame.errors import ConfigError, did_you_mean
 
-__all__ = ["COLUMNS", "NOMINAL", "PayoffTable", "ci95", "cvar", "degradation", "worst_case"]
+__all__ = [
+    "COLUMNS",
+    "NOMINAL",
+    "NOT_APPLICABLE",
+    "PayoffTable",
+    "ci95",
+    "cvar",
+    "degradation",
+    "worst_case",
+]
 
 NOMINAL = "nominal"
 """The adversary name of the undisrupted game, the reference of `degradation`."""
+NOT_APPLICABLE = "not_applicable"
+"""The file column holding why a cell was not played (`PayoffTable.not_applicable`)."""
 COLUMNS: tuple[str, ...] = ("scenario", "protagonist", "adversary", "seed", "episode")
 COLUMNS += ("true_return", "observed_return", "cost", "payoff", "length", "clipped", "terminated")
 """The columns of every row (`advgame.core.episodes.EpisodeResult`, clips summed); tags add more."""
@@ -110,6 +121,10 @@ class PayoffTable:
 
     Args:
         rows: dicts with at least ``protagonist``, ``adversary``, ``seed`` and ``true_return``.
+        not_applicable: ``{(protagonist, adversary): reason}`` for cells that were not played
+            because the column cannot play that row (e.g. a white-box attack against a fixed
+            controller). They show as "n/a" in matrices and reports and are left out of every
+            metric; the files keep them (one row per cell with a ``not_applicable`` reason).
 
     Example:
         >>> t = PayoffTable([{"protagonist": "p", "adversary": a, "seed": 0, "true_return": r}
@@ -120,12 +135,18 @@ class PayoffTable:
 
     """
 
-    def __init__(self, rows: Iterable[Mapping[str, Any]] = ()) -> None:
+    def __init__(
+        self,
+        rows: Iterable[Mapping[str, Any]] = (),
+        not_applicable: Mapping[tuple[str, str], str] | None = None,
+    ) -> None:
         self.rows: list[dict[str, Any]] = [dict(r) for r in rows]
         for r in self.rows:
             missing = {"protagonist", "adversary", "seed", "true_return"} - r.keys()
             if missing:
                 raise ConfigError(f"Payoff row {r} lacks the columns {sorted(missing)}.")
+        self.not_applicable: dict[tuple[str, str], str] = dict(not_applicable or {})
+        """``{(protagonist, adversary): reason}``: cells the column could not play."""
 
     def __len__(self) -> int:
         return len(self.rows)
@@ -136,13 +157,15 @@ class PayoffTable:
 
     @property
     def protagonists(self) -> list[str]:
-        """Protagonist names in order of first appearance."""
-        return list(dict.fromkeys(r["protagonist"] for r in self.rows))
+        """Protagonist names in order of first appearance (cells not applicable included)."""
+        played = (r["protagonist"] for r in self.rows)
+        return list(dict.fromkeys([*played, *(p for p, _ in self.not_applicable)]))
 
     @property
     def adversaries(self) -> list[str]:
-        """Adversary names in order of first appearance."""
-        return list(dict.fromkeys(r["adversary"] for r in self.rows))
+        """Adversary names in order of first appearance (cells not applicable included)."""
+        played = (r["adversary"] for r in self.rows)
+        return list(dict.fromkeys([*played, *(a for _, a in self.not_applicable)]))
 
     def columns(self) -> list[str]:
         """Return the `COLUMNS` present in the rows, then the other (tag) columns, sorted."""
@@ -208,6 +231,7 @@ class PayoffTable:
         ``worst_adversary``; ``cvar`` the `cvar` of their episodes; ``degradation`` and
         ``worst_degradation`` of mean and worst from nominal (`degradation`); ``nominal_ci95``
         and ``worst_ci95`` the 95 % half-widths over seeds of those two cells (`ci95`).
+        Cells in `not_applicable` are left out; ``not_applicable`` counts them per protagonist.
         """
         rows = []
         for p in self.protagonists:
@@ -226,6 +250,7 @@ class PayoffTable:
             row["worst_degradation"] = degradation(nom, worst)
             row["nominal_ci95"] = ci95(self.seed_means(p, nominal))
             row["worst_ci95"] = ci95(self.seed_means(p, worst_adv))
+            row["not_applicable"] = sum(1 for q, _ in self.not_applicable if q == p)
             rows.append({**row, "adversaries": len(means), "episodes": int(pooled.size)})
         return rows
 
@@ -259,31 +284,59 @@ class PayoffTable:
             out.append(row)
         return out
 
+    def na_rows(self) -> list[dict[str, Any]]:
+        """One row per cell not applicable: protagonist, adversary and the ``not_applicable`` reason."""
+        return [
+            {"protagonist": p, "adversary": a, NOT_APPLICABLE: reason}
+            for (p, a), reason in self.not_applicable.items()
+        ]
+
     def to_csv(self, path: str | Path) -> Path:
-        """Write the rows as CSV (`columns` order; missing tags left empty); return the path."""
+        """Write the rows as CSV (`columns` order; missing tags left empty); return the path.
+
+        Cells not applicable follow the episode rows, one row each with only ``protagonist``,
+        ``adversary`` and the reason in the ``not_applicable`` column.
+        """
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
+        fields = self.columns() + ([NOT_APPLICABLE] if self.not_applicable else [])
         with path.open("w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=self.columns(), restval="")
+            writer = csv.DictWriter(f, fieldnames=fields, restval="")
             writer.writeheader()
             writer.writerows(self.rows)
+            writer.writerows(self.na_rows())
         return path
 
     @classmethod
     def from_csv(cls, path: str | Path) -> PayoffTable:
         """Read a table written by `to_csv` (numbers parsed back; empty cells dropped)."""
         with Path(path).open(newline="") as f:
-            rows = list(csv.DictReader(f))
-        return cls({k: _parse(k, v) for k, v in r.items() if v != ""} for r in rows)
+            rows = [{k: _parse(k, v) for k, v in r.items() if v != ""} for r in csv.DictReader(f)]
+        return cls._split(rows)
+
+    @classmethod
+    def _split(cls, rows: Iterable[Mapping[str, Any]]) -> PayoffTable:
+        """A table from rows as the files hold them: episode rows and not-applicable rows."""
+        played, na = [], {}
+        for r in rows:
+            if NOT_APPLICABLE in r:
+                na[(str(r["protagonist"]), str(r["adversary"]))] = str(r[NOT_APPLICABLE])
+            else:
+                played.append(r)
+        return cls(played, na)
 
     def to_json(self, path: str | Path) -> Path:
-        """Write ``{"columns": [...], "rows": [...]}`` as JSON; return the path."""
+        """Write ``{"columns": [...], "rows": [...]}`` as JSON; return the path.
+
+        Cells not applicable are rows too, as in `to_csv`.
+        """
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"columns": self.columns(), "rows": self.rows}, indent=1))
+        data = {"columns": self.columns(), "rows": self.rows + self.na_rows()}
+        path.write_text(json.dumps(data, indent=1))
         return path
 
     @classmethod
     def from_json(cls, path: str | Path) -> PayoffTable:
         """Read a table written by `to_json`."""
-        return cls(json.loads(Path(path).read_text())["rows"])
+        return cls._split(json.loads(Path(path).read_text())["rows"])

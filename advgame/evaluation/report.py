@@ -65,7 +65,8 @@ def _save(fig: Any, path: str | Path) -> Path:
 def plot_heatmap(table: PayoffTable, path: str | Path, stat: str = "mean", title: str = "") -> Path:
     """Draw protagonists × adversaries, the `stat` true return of each cell, annotated; save it.
 
-    Cells not played are left blank. Returns the path of the PNG (or any matplotlib format).
+    Cells not played are left blank, cells not applicable (`PayoffTable.not_applicable`) say
+    "n/a". Returns the path of the PNG (or any matplotlib format).
     """
     plt = _pyplot()
     ps, adv, m = table.matrix(stat)
@@ -75,11 +76,13 @@ def plot_heatmap(table: PayoffTable, path: str | Path, stat: str = "mean", title
     im = ax.imshow(np.ma.masked_invalid(m), cmap="viridis", aspect="auto")
     ax.set_xticks(range(len(adv)), adv, rotation=30, ha="right")
     ax.set_yticks(range(len(ps)), ps)
-    lo, hi = np.nanmin(m), np.nanmax(m)
+    lo, hi = (np.nanmin(m), np.nanmax(m)) if np.isfinite(m).any() else (0.0, 0.0)
     for (i, j), v in np.ndenumerate(m):
         if math.isfinite(v):
             dark = hi > lo and (v - lo) / (hi - lo) < 0.5
             ax.text(j, i, f"{v:.4g}", ha="center", va="center", color="w" if dark else "k")
+        elif (ps[i], adv[j]) in table.not_applicable:
+            ax.text(j, i, "n/a", ha="center", va="center", color="0.4")
     fig.colorbar(im, ax=ax, label=f"{stat} true return")
     ax.set_title(title or f"{stat} true return: protagonists × adversaries")
     return _save(fig, path)
@@ -313,13 +316,18 @@ def write_report(
     header += ["degradation", "worst deg."]
     ps, adv, _ = table.matrix()
     cells = {(c["protagonist"], c["adversary"]): c for c in table.cells()}
-    matrix_rows = [[p, *(_cell(cells.get((p, a))) for a in adv)] for p in ps]
+    na = table.not_applicable
+    matrix_rows = [
+        [p, *("n/a" if (p, a) in na else _cell(cells.get((p, a))) for a in adv)] for p in ps
+    ]
     parts = [f"# {title}", "## Robust metrics", _md_table([*header, "episodes"], metric_rows)]
     parts += [
         "## Payoff matrix",
-        "Mean true return ± 95 % CI over seeds.",
+        "Mean true return ± 95 % CI over seeds" + ("; n/a: not applicable." if na else "."),
         _md_table(["", *adv], matrix_rows),
     ]
+    if na:
+        parts += ["## Cells not applicable", not_applicable_md(na)]
     if cost_limit is not None or table.has_cost:
         limit = DEFAULT_COST_LIMIT if cost_limit is None else cost_limit
         body, figs["return vs episode cost"] = _safety_section(table, out, limit)
@@ -333,6 +341,17 @@ def write_report(
     path.write_text("\n\n".join(parts) + "\n")
     log.info("wrote %s", path)
     return path
+
+
+def not_applicable_md(na: Mapping[tuple[str, str], str]) -> str:
+    """Markdown: the cells that were not played, with each column's reason."""
+    lines = [
+        "These cells were not played: their column cannot play that protagonist. They are "
+        "left out of every metric above (mean, worst, CVaR, degradation).",
+        "",
+    ]
+    lines += [f"- **{_fmt(p)}** × **{_fmt(a)}**: {_fmt(why)}" for (p, a), why in na.items()]
+    return "\n".join(lines)
 
 
 def adversary_listing(columns: Mapping[str, Mapping[str, Any]]) -> str:
