@@ -2,9 +2,22 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterator
 
 import pytest
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _cache_in_tmp(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Caches advgame writes (Robust Sarsa critics) go to a temporary folder, not ~/.cache."""
+    before = os.environ.get("ADVGAME_CACHE")
+    os.environ["ADVGAME_CACHE"] = str(tmp_path_factory.mktemp("advgame-cache"))
+    yield
+    if before is None:
+        os.environ.pop("ADVGAME_CACHE", None)
+    else:
+        os.environ["ADVGAME_CACHE"] = before
 
 
 @pytest.fixture

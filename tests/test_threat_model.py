@@ -38,7 +38,8 @@ def test_every_row_faces_one_threat_model_and_the_worst_attack_is_named(
     assert json.loads((ppo / "config.json").read_text())["preset"] != "atla"  # unlike trainings
     out = tmp_path / "results"
     args = ["evaluate", str(ppo), str(atla), "--out", str(out), "--seeds", "1", "--budgets"]
-    args += ["--adversaries", "attacks", "--exploitability", "64", "--workers", "1"]
+    args += ["--adversaries", "attacks,samples=500,epochs=2", "--exploitability", "64"]
+    args += ["--workers", "1"]
     assert main(args) == 0
     threat = json.loads((out / "threat.json").read_text())
     assert threat["preset"] == default_threat("Hopper-v5") == "atla"
@@ -48,6 +49,7 @@ def test_every_row_faces_one_threat_model_and_the_worst_attack_is_named(
         "attack random",
         "attack mad",
         "attack critic",
+        "attack rs",
         "learned (atla)",
     }
     for name, column in columns.items():

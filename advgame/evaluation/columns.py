@@ -11,12 +11,14 @@ named `AdversarySetup`s (``nominal`` always first, the metrics are relative to i
                                  RUN_DIR: of every evaluated run)
     population:RUN_DIR|FILE      every learned snapshot, one column per iteration; options
                                  last=K, sample=K, preset=NAME (a file outside a run dir)
-    attack:random|mad|critic     an attack on the threat model's observation disruptor: noise
+    attack:random|mad|critic|rs  an attack on the threat model's observation disruptor: noise
                                  filling its budget, or a white-box attack on each protagonist's
-                                 own networks (`advgame.adversaries.whitebox`)
+                                 own networks (`advgame.adversaries.whitebox`); ``rs`` is Robust
+                                 Sarsa (`advgame.adversaries.robust_sarsa`; options samples=N,
+                                 epochs=N for its critic)
     attacks                      the worst-of-attacks suite: attack:random, attack:mad,
-                                 attack:critic (skipped for teams: their actors have no critic)
-                                 and every evaluated run's learned adversaries
+                                 attack:critic (skipped for teams: their actors have no critic),
+                                 attack:rs and every evaluated run's learned adversaries
     default                      nominal, random, scheduled, learned (``advgame evaluate``'s)
 
 **One threat model per table.** A table compares protagonists like for like only if every one
@@ -149,7 +151,9 @@ def _population(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[s
     return {f"population {source}@{it}": _learned_setup(ctx, preset, snaps[it], opts) for it in its}
 
 
-ATTACKS = ("random", "mad", "critic")
+OPTIONS = ("last", "sample", "preset", "samples", "epochs")
+"""The ``KEY=VALUE`` options a column spec may carry."""
+ATTACKS = ("random", "mad", "critic", "rs")
 """The attacks of the ``attack:`` kind, and of the ``attacks`` suite (in this order)."""
 
 
@@ -161,7 +165,7 @@ def default_threat(scenario: str) -> str:
 
 
 def _attack(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
-    from advgame.adversaries import CriticAttack, MADAttack, RandomAdversary
+    from advgame.adversaries import CriticAttack, MADAttack, RandomAdversary, RobustSarsaAttack
 
     if arg not in ATTACKS:
         hint = did_you_mean(arg, ATTACKS)
@@ -170,7 +174,9 @@ def _attack(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, 
         )
     preset = opts.get("preset") or ctx.threat or default_threat(ctx.scenario)
     agent = _observation_agent(ctx.scenario, preset)
-    spec = {"random": RandomAdversary, "mad": MADAttack, "critic": CriticAttack}[arg]()
+    kinds = {"mad": MADAttack, "critic": CriticAttack, "rs": RobustSarsaAttack}
+    options = {k: _count(opts, k, None) for k in ("samples", "epochs") if arg == "rs" and k in opts}
+    spec = RandomAdversary() if arg == "random" else kinds[arg](**options)
     return {f"attack {arg}": AdversarySetup({"preset": preset}, {agent: spec})}
 
 
@@ -338,7 +344,7 @@ def _count(opts: Mapping[str, str], key: str, default: int | None) -> int | None
     except ValueError:
         value = 0
     if value < 1:
-        raise ConfigError(f"{key}={opts[key]!r} must be an int >= 1: {key}=K keeps K snapshots.")
+        raise ConfigError(f"{key}={opts[key]!r} must be an int >= 1, e.g. {key}=3.")
     return value
 
 
@@ -354,9 +360,10 @@ def parse_spec(spec: str) -> tuple[str, str, dict[str, str]]:
     opts = {}
     for item in rest:
         key, sep, value = item.partition("=")
-        if not sep or key not in ("last", "sample", "preset"):
+        if not sep or key not in OPTIONS:
             raise ConfigError(
-                f"Bad option {item!r} in {spec!r}; options are last=K, sample=K, preset=NAME."
+                f"Bad option {item!r} in {spec!r}; options are last=K, sample=K, preset=NAME "
+                "(populations), samples=N, epochs=N (the Robust Sarsa critic of attack:rs)."
             )
         opts[key] = value
     return kind, arg, opts
