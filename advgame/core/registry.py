@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from advgame.errors import (
+    AdvgameError,
     ConfigError,
     MissingExtraError,
     UnknownNameError,
@@ -167,6 +169,7 @@ def make(
 
     spec = scenario_spec(scenario_id)
     spec.check_installed()
+    _check_make_options(preset, phase, cost_weight, task_kwargs)
     chosen = None
     if disruptors is not None and preset is not None:
         raise ConfigError("Give either preset=... or disruptors=..., not both.")
@@ -183,19 +186,64 @@ def make(
     else:
         specs = _as_specs(disruptors)
     weight = cost_weight if cost_weight is not None else (chosen.cost_weight if chosen else 0.0)
-    game = Game(
-        spec.make_task(**task_kwargs),
-        specs,
-        cost_weight=weight,
-        phase=phase,
-        scenario_id=scenario_id,
-    )
+    task = _make_task(spec, task_kwargs)
+    try:
+        game = Game(task, specs, cost_weight=weight, phase=phase, scenario_id=scenario_id)
+    except AdvgameError:
+        task.close()
+        raise
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
+        task.close()
+        raise ConfigError(
+            f"The disruptors {list(specs)} do not fit {scenario_id!r}: "
+            f"{type(exc).__name__}: {exc}. Check their dims, bodies, parameters and targets "
+            f"against the task (advgame.make({scenario_id!r}).state_space and the docs)."
+        ) from exc
     game.preset = chosen
     return game
 
 
+def _check_make_options(
+    preset: Any, phase: Any, cost_weight: Any, task_kwargs: Mapping[str, Any]
+) -> None:
+    """`make`'s own options, and the task options every task base shares, checked up front."""
+    if preset is not None and not isinstance(preset, str):
+        raise ConfigError(f"preset must be a preset name (str), got {preset!r}.")
+    if phase not in ("train", "eval"):
+        raise ConfigError(f"phase must be 'train' or 'eval', got {phase!r}.")
+    if cost_weight is not None and (
+        isinstance(cost_weight, bool)
+        or not isinstance(cost_weight, (int, float))
+        or not math.isfinite(cost_weight)
+        or cost_weight < 0
+    ):
+        raise ConfigError(f"cost_weight must be a finite number >= 0, got {cost_weight!r}.")
+    steps = task_kwargs.get("max_episode_steps")
+    if steps is not None and (type(steps) is not int or steps < 1):
+        raise ConfigError(
+            f"max_episode_steps must be an int >= 1 (or None for the task's own limit), "
+            f"got {steps!r}."
+        )
+
+
+def _make_task(spec: ScenarioSpec, task_kwargs: Mapping[str, Any]) -> Any:
+    """The task base, its constructor's errors for the user's task options made clear."""
+    try:
+        return spec.make_task(**task_kwargs)
+    except AdvgameError:
+        raise
+    except (TypeError, ValueError) as exc:
+        if not task_kwargs:
+            raise
+        raise ConfigError(
+            f"Scenario {spec.id!r} rejected the task options {dict(task_kwargs)!r} "
+            f"({type(exc).__name__}: {exc}). Task options are passed to its task base: "
+            "e.g. max_episode_steps, render_mode, and the scenario's own (see its docs)."
+        ) from exc
+
+
 def _as_specs(disruptors: Sequence[DisruptorSpec] | Mapping[str, Any]) -> tuple[DisruptorSpec, ...]:
-    from advgame.disruptors import from_config
+    from advgame.disruptors import DisruptorSpec, from_config
 
     if isinstance(disruptors, Mapping):
         out = []
@@ -206,5 +254,11 @@ def _as_specs(disruptors: Sequence[DisruptorSpec] | Mapping[str, Any]) -> tuple[
     if isinstance(disruptors, (str, bytes)) or not isinstance(disruptors, Sequence):
         raise ConfigError(
             f"disruptors must be a list of DisruptorSpec or a dict {{kind: options}}, got {disruptors!r}."
+        )
+    bad = [d for d in disruptors if not isinstance(d, DisruptorSpec)]
+    if bad:
+        raise ConfigError(
+            f"disruptors must be DisruptorSpec objects (e.g. ObservationDisruptor(eps=0.1)) or "
+            f"a dict {{kind: options}}; got {bad[0]!r} in the list."
         )
     return tuple(disruptors)

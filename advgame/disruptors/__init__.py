@@ -18,7 +18,7 @@ from advgame.disruptors.force import ForceDisruptor
 from advgame.disruptors.observation import ObservationDisruptor
 from advgame.disruptors.reward import RewardDisruptor
 from advgame.disruptors.workspace import Shift, WorkspaceDisruptor
-from advgame.errors import ConfigError, UnknownNameError, did_you_mean
+from advgame.errors import AdvgameError, ConfigError, UnknownNameError, did_you_mean
 
 __all__ = [
     "KINDS",
@@ -61,21 +61,47 @@ def from_config(kind: str, config: Mapping[str, Any] | DisruptorSpec) -> Disrupt
     """
     if isinstance(config, DisruptorSpec):
         return config
-    cfg = dict(config)
-    if kind == "cost":
-        kind, cfg = "reward", {**cfg, "signal": "cost"}
-    if kind not in KINDS:
+    if not isinstance(kind, str) or kind not in [*KINDS, "cost"]:
         raise UnknownNameError(
-            f"Unknown disruptor kind {kind!r}.{did_you_mean(kind, KINDS)} Known kinds: "
+            f"Unknown disruptor kind {kind!r}.{did_you_mean(str(kind), KINDS)} Known kinds: "
             f"{sorted([*KINDS, 'cost'])}."
         )
+    if not isinstance(config, Mapping):
+        raise ConfigError(
+            f"The options of a {kind!r} disruptor must be a dict of its fields (e.g. "
+            f"{{'eps': 0.1}}; {{}} for its defaults), got {config!r}."
+        )
+    try:
+        return _build(kind, dict(config))
+    except AdvgameError as exc:
+        raise type(exc)(f"In the {kind!r} disruptor {dict(config)!r}: {exc}") from None
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
+        raise ConfigError(
+            f"Bad options for a {kind!r} disruptor {dict(config)!r}: {exc}. Its fields are "
+            f"those of {KINDS['reward' if kind == 'cost' else kind].__name__} "
+            "(see its docstring)."
+        ) from exc
+
+
+def _build(kind: str, cfg: dict[str, Any]) -> DisruptorSpec:
+    """`from_config`'s construction, nested dicts (schedule, params, shifts) included."""
+    if kind == "cost":
+        kind, cfg = "reward", {**cfg, "signal": "cost"}
     if isinstance(cfg.get("schedule"), Mapping):
         cfg["schedule"] = Schedule(**cfg["schedule"])
     if kind == "dynamics" and "params" in cfg:
-        cfg["params"] = tuple(p if isinstance(p, Param) else Param(**p) for p in cfg["params"])
+        cfg["params"] = tuple(_item(Param, p, "params") for p in cfg["params"])
     if kind == "workspace" and "shifts" in cfg:
-        cfg["shifts"] = tuple(s if isinstance(s, Shift) else Shift(**s) for s in cfg["shifts"])
-    try:
-        return KINDS[kind](**cfg)
-    except TypeError as exc:
-        raise ConfigError(f"Bad options for a {kind!r} disruptor: {exc}.") from None
+        cfg["shifts"] = tuple(_item(Shift, s, "shifts") for s in cfg["shifts"])
+    return KINDS[kind](**cfg)
+
+
+def _item(cls: type, value: Any, field: str) -> Any:
+    """One entry of a list field: an instance of `cls` or a dict of its fields."""
+    if isinstance(value, cls):
+        return value
+    if not isinstance(value, Mapping):
+        raise ConfigError(
+            f"Each of {field} must be a {cls.__name__} or a dict of its fields, got {value!r}."
+        )
+    return cls(**value)

@@ -344,7 +344,7 @@ def _count(opts: Mapping[str, str], key: str, default: int | None) -> int | None
     except ValueError:
         value = 0
     if value < 1:
-        raise ConfigError(f"{key}={opts[key]!r} must be an int >= 1, e.g. {key}=3.")
+        raise ConfigError(f"{key}={opts[key]!r} must be an int >= 1: write {key}=K with K >= 1.")
     return value
 
 
