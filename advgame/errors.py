@@ -10,6 +10,7 @@ __all__ = [
     "AdvgameError",
     "BudgetError",
     "ConfigError",
+    "FileFormatError",
     "MissingExtraError",
     "UnknownNameError",
     "UnknownScenarioError",
@@ -23,6 +24,14 @@ class AdvgameError(Exception):
 
 class ConfigError(AdvgameError, ValueError):
     """A configuration value (disruptor, schedule, preset, learner) is invalid."""
+
+
+class FileFormatError(ConfigError):
+    """A file advgame wrote (run state, checkpoint, population, results) cannot be read back.
+
+    The message names the file and says whether it looks truncated (an interrupted write or
+    copy) or written by another version, and what to do.
+    """
 
 
 class BudgetError(ConfigError):

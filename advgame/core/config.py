@@ -16,10 +16,11 @@ import json
 import os
 import textwrap
 import typing
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from advgame.errors import ConfigError, did_you_mean
+from advgame.errors import ConfigError, FileFormatError, did_you_mean
 
 __all__ = [
     "add_arguments",
@@ -104,6 +105,50 @@ def write_atomic(path: str | Path, data: str | bytes) -> None:
     os.replace(tmp, path)
 
 
+def read_json(path: str | Path, what: str, keys: Iterable[str] = ()) -> Any:
+    """Read a JSON file advgame wrote; a damaged one is a `FileFormatError` that says how.
+
+    Args:
+        path: the file.
+        what: what it is, for the message (``"the run state"``).
+        keys: keys the top-level object must have (else: another version, or edited).
+
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise FileFormatError(f"{what} {path} is missing.") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FileFormatError(f"{what} {path} cannot be read ({exc}).") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(
+            f"{what} {path} is not valid JSON ({exc}): {_damage(text, exc)}"
+        ) from None
+    missing = [k for k in keys if not isinstance(data, dict) or k not in data]
+    if missing:
+        raise FileFormatError(
+            f"{what} {path} lacks {missing}: it was written by another version of advgame or "
+            "edited by hand. Restore it, or start that step again in a new folder."
+        )
+    return data
+
+
+def _damage(text: str, exc: json.JSONDecodeError) -> str:
+    """Why a JSON text failed: cut short, empty, or garbled."""
+    if not text.strip():
+        return "it is empty, probably from an interrupted write; delete it and rerun the step."
+    unclosed = text.count("{") + text.count("[") - text.count("}") - text.count("]")
+    if exc.pos >= len(text.rstrip()) or unclosed > 0 or exc.msg.startswith("Unterminated"):
+        return (
+            "it ends mid-document, so it looks truncated (an interrupted write or copy); "
+            "restore it or rerun the step that wrote it."
+        )
+    return "it is garbled or not a file advgame wrote; restore it or rerun the step."
+
+
 def save_json(cfg: Any, path: str | Path) -> None:
     """Write a config as JSON."""
     Path(path).write_text(json.dumps(to_dict(cfg), indent=2, sort_keys=True) + "\n")
@@ -111,10 +156,9 @@ def save_json(cfg: Any, path: str | Path) -> None:
 
 def load_json(cls: type[T], path: str | Path) -> T:
     """Read a config from JSON written by `save_json` (or by hand)."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"Cannot read config {path}: {exc}") from exc
+    data = read_json(path, "The config")
+    if not isinstance(data, dict):
+        raise FileFormatError(f"The config {path} holds {type(data).__name__}, not an object.")
     return from_dict(cls, data)
 
 

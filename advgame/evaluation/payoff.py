@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.errors import ConfigError, did_you_mean
+from advgame.errors import ConfigError, FileFormatError, did_you_mean
 
 __all__ = [
     "COLUMNS",
@@ -310,9 +310,35 @@ class PayoffTable:
     @classmethod
     def from_csv(cls, path: str | Path) -> PayoffTable:
         """Read a table written by `to_csv` (numbers parsed back; empty cells dropped)."""
-        with Path(path).open(newline="") as f:
-            rows = [{k: _parse(k, v) for k, v in r.items() if v != ""} for r in csv.DictReader(f)]
-        return cls._split(rows)
+        path = Path(path)
+        try:
+            with path.open(newline="") as f:
+                raw = list(csv.DictReader(f))
+        except FileNotFoundError:
+            raise FileFormatError(f"The payoff table {path} is missing.") from None
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise FileFormatError(f"The payoff table {path} cannot be read ({exc}).") from None
+        rows = []
+        for n, r in enumerate(raw, start=2):
+            if None in r or None in r.values():  # more fields than the header, or fewer
+                raise FileFormatError(
+                    f"Line {n} of the payoff table {path} has {len(r) - (None in r)} fields where "
+                    "the header has others: the file looks truncated or edited. Evaluate again "
+                    "(`advgame evaluate ... --out FOLDER`) to rewrite it."
+                )
+            try:
+                rows.append({k: _parse(k, v) for k, v in r.items() if v != ""})
+            except ValueError as exc:
+                raise FileFormatError(
+                    f"Line {n} of the payoff table {path} does not parse ({exc}): the file looks "
+                    "truncated or edited. Evaluate again to rewrite it."
+                ) from None
+        try:
+            return cls._split(rows)
+        except (ConfigError, KeyError) as exc:
+            raise FileFormatError(
+                f"The payoff table {path} is not one advgame wrote ({exc}); evaluate again."
+            ) from None
 
     @classmethod
     def _split(cls, rows: Iterable[Mapping[str, Any]]) -> PayoffTable:
@@ -339,4 +365,6 @@ class PayoffTable:
     @classmethod
     def from_json(cls, path: str | Path) -> PayoffTable:
         """Read a table written by `to_json`."""
-        return cls._split(json.loads(Path(path).read_text())["rows"])
+        from advgame.core.config import read_json
+
+        return cls._split(read_json(path, "The payoff table", ("rows",))["rows"])

@@ -10,7 +10,6 @@ evaluate`` options into the same specs.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -18,6 +17,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.config import read_json
 from advgame.errors import ConfigError, did_you_mean
 from advgame.training.checkpoint import ALGOS, SB3Checkpoint
 
@@ -49,7 +49,7 @@ def run_protagonist(run_dir: Path) -> tuple[Any, Any]:
             f"{run_dir} has no finished iteration (no state.json); train or resume it."
         )
     cfg = load_json(TrainConfig, run_dir / "config.json")
-    folder = run_dir / json.loads(state_path.read_text())["checkpoint"]
+    folder = run_dir / read_json(state_path, "The run state", ("checkpoint",))["checkpoint"]
     if cfg.protagonist_algo in TEAM_ALGOS:
         path = folder / f"{cfg.protagonist_algo}_actors.pt"
         return cfg, team_protagonist(cfg.scenario, path, preset=cfg.preset)

@@ -10,6 +10,7 @@ the policy was trained behind: the project's ``*_obs_norm.npz`` (``mean`` and ``
 from __future__ import annotations
 
 import functools
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from advgame.core.policy import AgentInfo
-from advgame.errors import ConfigError
+from advgame.errors import ConfigError, FileFormatError
 
 __all__ = ["ALGOS", "Normalizer", "SB3Checkpoint", "SB3Policy", "load_model", "load_normalizer"]
 
@@ -46,7 +47,29 @@ def load_model(path: str, algo: str) -> Any:
         "replay_buffer_class": None,
         "replay_buffer_kwargs": {},
     }  # only where saved (SAC/TD3)
-    return _algo_class(algo).load(path, device="cpu", custom_objects=plain)
+    if not zipfile.is_zipfile(path):
+        size = Path(path).stat().st_size
+        raise FileFormatError(
+            f"The checkpoint {path} is not a zip file ({size} bytes): "
+            + ("it is empty" if size == 0 else "it looks truncated or is not an SB3 model")
+            + ". Give the .zip that SB3's model.save() wrote (restore it, or train again)."
+        )
+    try:
+        return _algo_class(algo).load(path, device="cpu", custom_objects=plain)
+    except (
+        AssertionError,
+        KeyError,
+        ValueError,
+        EOFError,
+        RuntimeError,
+        zipfile.BadZipFile,
+    ) as exc:
+        raise FileFormatError(
+            f"The checkpoint {path} cannot be loaded as an SB3 {algo.upper()} model "
+            f"({type(exc).__name__}: {exc}): it looks truncated, or was saved by another "
+            "algorithm or another Stable-Baselines3 version. Check the :ALGO suffix, restore "
+            "the file, or train again."
+        ) from None
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.core.config import write_atomic
+from advgame.core.config import read_json, write_atomic
 from advgame.core.episodes import filler_action, rollout
 from advgame.core.policy import ConstantPolicy
 from advgame.core.registry import load, make
@@ -223,7 +223,9 @@ class Run:
 
     def _restore(self) -> int:
         t = self.t
-        state = json.loads((self.dir / "state.json").read_text())
+        state = read_json(
+            self.dir / "state.json", "The run state", ("iteration", "rng", "checkpoint")
+        )
         t.population = Population.load(self.dir / "population.json")
         t.population.members = [m for m in t.population if m.iteration <= state["iteration"]]
         t.rng.bit_generator.state = state["rng"]

@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from advgame.core.config import write_atomic
+from advgame.core.config import read_json, write_atomic
 from advgame.core.registry import load
-from advgame.errors import ConfigError
+from advgame.errors import ConfigError, FileFormatError
 
 __all__ = [
     "PATH_FIELDS",
@@ -201,9 +201,11 @@ class Population:
     @classmethod
     def load(cls, path: str | Path) -> Population:
         """Read a population file."""
-        try:
-            data = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ConfigError(f"Cannot read population {path}: {exc}") from exc
+        data = read_json(path, "The population file")
+        if not isinstance(data, list):
+            raise FileFormatError(
+                f"The population file {path} holds {type(data).__name__}, not a list of members: "
+                "it is not a population.json advgame wrote."
+            )
         base = Path(path).parent
         return cls([Member.from_dict(d, base) for d in data])
