@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 
@@ -29,6 +30,25 @@ def one_torch_thread() -> Iterator[None]:
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="session")
+def pendulum_ppo(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A PPO trained a little (4096 steps) with plain SB3 on InvertedPendulum-v5, no normalizer."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import PPO
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    path = tmp_path_factory.mktemp("pendulum") / "ppo.zip"
+    env = gym.make("InvertedPendulum-v5")
+    model = PPO("MlpPolicy", env, n_steps=512, batch_size=64, n_epochs=4, seed=0, device="cpu")
+    model.learn(4096)
+    model.save(path)
+    env.close()
+    torch.set_num_threads(before)
+    return path
 
 
 @pytest.fixture(scope="session")

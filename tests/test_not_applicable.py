@@ -26,21 +26,10 @@ def still(obs: np.ndarray) -> np.ndarray:
     return np.zeros(1, dtype=np.float32)
 
 
-@pytest.fixture(scope="module")
-def model(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A small PPO trained with plain SB3 on InvertedPendulum-v5, saved without a normalizer."""
-    import gymnasium as gym
-    import torch
-    from stable_baselines3 import PPO
-
-    torch.set_num_threads(1)
-    path = tmp_path_factory.mktemp("model") / "ppo.zip"
-    env = gym.make("InvertedPendulum-v5")
-    ppo = PPO("MlpPolicy", env, n_steps=256, batch_size=64, n_epochs=1, seed=0, device="cpu")
-    ppo.learn(256)
-    ppo.save(path)
-    env.close()
-    return path
+@pytest.fixture
+def model(pendulum_ppo: Path) -> Path:
+    """The session's small PPO on InvertedPendulum-v5 (`pendulum_ppo`)."""
+    return pendulum_ppo
 
 
 def _setups() -> dict[str, AdversarySetup]:

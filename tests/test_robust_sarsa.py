@@ -21,20 +21,10 @@ from advgame.evaluation import (
 SMALL = {"samples": 3000, "epochs": 8}
 
 
-@pytest.fixture(scope="module")
-def pendulum(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A PPO on InvertedPendulum-v5 trained a little with plain SB3 (no normalizer)."""
-    import gymnasium as gym
-    from stable_baselines3 import PPO
-
-    torch.set_num_threads(1)
-    path = tmp_path_factory.mktemp("rs") / "ppo.zip"
-    env = gym.make("InvertedPendulum-v5")
-    model = PPO("MlpPolicy", env, n_steps=512, batch_size=64, n_epochs=4, seed=0, device="cpu")
-    model.learn(4096)
-    model.save(path)
-    env.close()
-    return path
+@pytest.fixture
+def pendulum(pendulum_ppo: Path) -> Path:
+    """The session's small PPO on InvertedPendulum-v5 (`pendulum_ppo`)."""
+    return pendulum_ppo
 
 
 def _setups(cache: Path) -> dict[str, AdversarySetup]:
