@@ -6,6 +6,7 @@ class; a new disruptor is one file plus one line here.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
@@ -88,7 +89,7 @@ def _build(kind: str, cfg: dict[str, Any]) -> DisruptorSpec:
     if kind == "cost":
         kind, cfg = "reward", {**cfg, "signal": "cost"}
     if isinstance(cfg.get("schedule"), Mapping):
-        cfg["schedule"] = Schedule(**cfg["schedule"])
+        cfg["schedule"] = _item(Schedule, cfg["schedule"], "schedule")
     if kind == "dynamics" and "params" in cfg:
         cfg["params"] = tuple(_item(Param, p, "params") for p in cfg["params"])
     if kind == "workspace" and "shifts" in cfg:
@@ -103,5 +104,12 @@ def _item(cls: type, value: Any, field: str) -> Any:
     if not isinstance(value, Mapping):
         raise ConfigError(
             f"Each of {field} must be a {cls.__name__} or a dict of its fields, got {value!r}."
+        )
+    names = [f.name for f in dataclasses.fields(cls)] if dataclasses.is_dataclass(cls) else []
+    unknown = [k for k in value if names and k not in names]
+    if unknown:
+        raise UnknownNameError(
+            f"{field} has no field {unknown[0]!r}.{did_you_mean(str(unknown[0]), names)} "
+            f"{cls.__name__} fields: {names}."
         )
     return cls(**value)
