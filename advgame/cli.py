@@ -263,7 +263,10 @@ def _evaluate_parser(sub: Any) -> None:
         type=int,
         default=0,
         metavar="STEPS",
-        help="train a best-response adversary for STEPS steps per protagonist",
+        help="the learned optimal attack: per protagonist (runs, checkpoints, teams, callables), "
+        "train one PPO observation adversary per point of a small hyper-parameter grid for "
+        "STEPS steps each in the threat model, keep the strongest as the 'attack optimal' "
+        "column, and report the exploitability (nominal minus its return)",
     )
     p.set_defaults(func=_cmd_evaluate)
 

@@ -50,6 +50,7 @@ def test_every_row_faces_one_threat_model_and_the_worst_attack_is_named(
         "attack mad",
         "attack critic",
         "attack rs",
+        "attack optimal",
         "learned (atla)",
     }
     for name, column in columns.items():

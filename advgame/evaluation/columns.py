@@ -173,14 +173,14 @@ def _attack(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, 
             f"Unknown attack {arg!r}.{hint} Attacks: attack:{', attack:'.join(ATTACKS)}."
         )
     preset = opts.get("preset") or ctx.threat or default_threat(ctx.scenario)
-    agent = _observation_agent(ctx.scenario, preset)
+    agent = observation_agent(ctx.scenario, preset)
     kinds = {"mad": MADAttack, "critic": CriticAttack, "rs": RobustSarsaAttack}
     options = {k: _count(opts, k, None) for k in ("samples", "epochs") if arg == "rs" and k in opts}
     spec = RandomAdversary() if arg == "random" else kinds[arg](**options)
     return {f"attack {arg}": AdversarySetup({"preset": preset}, {agent: spec})}
 
 
-def _observation_agent(scenario: str, preset: str) -> str:
+def observation_agent(scenario: str, preset: str) -> str:
     """The adversary of `preset`'s bounded observation disruptor (what attacks play)."""
     from advgame.core.registry import scenario_spec
 

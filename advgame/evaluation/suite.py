@@ -35,7 +35,9 @@ from advgame.evaluation.columns import (
     adversary_columns,
     default_threat,
     describe_column,
+    observation_agent,
 )
+from advgame.evaluation.optimal import OPTIMAL, OptimalSearch, optimal_jobs
 from advgame.evaluation.protagonists import check_protagonists, cli_protagonists, run_protagonist
 from advgame.training import TrainConfig
 
@@ -73,6 +75,7 @@ def evaluate_policies(
     budgets: Sequence[float] = BUDGETS,
     progress: bool = True,
     threat: str | None = None,
+    optimal: OptimalSearch | None = None,
 ) -> Path:
     """Evaluate fixed policies against chosen adversary columns; write the folder, return ``report.md``.
 
@@ -93,6 +96,9 @@ def evaluate_policies(
         progress: show progress bars.
         threat: the table's one threat model, a preset of `scenario` that attack, learned and
             best-response columns all play in (default `advgame.evaluation.columns.default_threat`).
+        optimal: search the learned optimal attack for every protagonist
+            (`advgame.evaluation.optimal`): the ``attack optimal`` column, and the
+            exploitability (nominal minus its return) in ``exploitability.json`` and the report.
 
     """
     out = Path(out)
@@ -122,17 +128,30 @@ def evaluate_policies(
         else j
         for j in jobs
     ]
-    table = evaluate(jobs, workers=workers, progress=progress)
     out.mkdir(parents=True, exist_ok=True)
+    threat = threat or default_threat(scenario)
+    if optimal is not None:
+        agent = observation_agent(scenario, threat)
+        jobs += optimal_jobs(scenario, threat, agent, protagonists, optimal, out, seeds=seed_list,
+                             episodes=episodes)  # fmt: skip
+    table = evaluate(jobs, workers=workers, progress=progress)
     table.to_csv(out / "payoff.csv")
+    if optimal is not None:
+        _write_exploitability(out, table, threat, optimal.steps)
     if budgets:
         sweep = budget_sweep(scenario, protagonists, budgets, seeds=seed_list, episodes=episodes)
         evaluate(sweep, workers=workers, progress=progress).to_csv(out / "budget.csv")
     else:
         (out / "budget.csv").unlink(missing_ok=True)
     columns_json = {n: describe_column(s) for n, s in columns.items()}
+    if optimal is not None:
+        searched = f"learned PPO adversaries, the strongest of {len(optimal.grid)} per protagonist"
+        columns_json[OPTIMAL] = {
+            "game": {"preset": threat},
+            "adversaries": {agent: f"{searched} ({optimal.steps} steps each; optimal.json)"},
+        }
     (out / "columns.json").write_text(json.dumps(columns_json, indent=2, default=str) + "\n")
-    record = _threat_record(scenario, threat or default_threat(scenario))
+    record = _threat_record(scenario, threat)
     (out / "threat.json").write_text(json.dumps(record, indent=2) + "\n")
     _write_runs(out, run_dirs)
     return report_folder(out, scenario=scenario)
@@ -266,33 +285,31 @@ def evaluate_runs(
     if clash:
         raise ConfigError(f"Protagonist names {clash} are taken by runs; name them apart.")
     protagonists.update(extra)
-    report = evaluate_policies(
+    search = (
+        OptimalSearch(steps=exploitability_steps, workers=workers) if exploitability_steps else None
+    )
+    return evaluate_policies(
         sid, protagonists, out, adversaries=adversaries, runs={n: d for n, (_, d) in found.items()},
         last=last, sample=sample, seed=seed, seeds=seeds, episodes=episodes, workers=workers,
-        budgets=budgets, progress=progress, threat=threat,
+        budgets=budgets, progress=progress, threat=threat, optimal=search,
     )  # fmt: skip
-    if exploitability_steps:
-        threat = threat or default_threat(sid)
-        _exploitability(sid, found, out, exploitability_steps, episodes * seeds, threat)
-        report = report_folder(out, scenario=sid)
-    return report
 
 
-def _exploitability(
-    scenario: str, found: dict, out: Path, steps: int, episodes: int, threat: str
-) -> None:
-    """Best responses to every run's protagonist, all trained in the one threat model."""
-    from advgame.evaluation.exploit import exploitability
-
+def _write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:
+    """``exploitability.json``: per protagonist, nominal and optimal-attack returns, and the drop."""
     results = {}
-    for name, ((_, spec), _) in found.items():
+    for name in table.protagonists:
+        nom, att = table.values(name, NOMINAL), table.values(name, OPTIMAL)
+        if not (nom.size and att.size):
+            continue
         results[name] = {
             "preset": threat,
-            **exploitability(
-                scenario, threat, spec, out / "best_response" / name, steps=steps, episodes=episodes
-            ),
+            "nominal_return": float(nom.mean()),
+            "best_response_return": float(att.mean()),
+            "exploitability": float(nom.mean() - att.mean()),
+            "best_response_steps": float(steps),
         }
-    (out / "exploitability.json").write_text(json.dumps(results, indent=2))
+    (out / "exploitability.json").write_text(json.dumps(results, indent=2) + "\n")
 
 
 def report_folder(folder: Path, scenario: str | None = None) -> Path:
