@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from advgame.errors import AdvgameError
+from advgame.errors import AdvgameError, ConfigError
 
 __all__ = ["main"]
 
@@ -271,6 +271,47 @@ def _evaluate_parser(sub: Any) -> None:
     p.set_defaults(func=_cmd_evaluate)
 
 
+def _campaign_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "campaign",
+        help="train a grid of methods x seeds, evaluate it in one threat model, write the table",
+        description="Run a campaign file (TOML, see advgame.campaign): trains every unfinished "
+        "run (interrupted ones resume), evaluates every finished one, writes campaign.md, and "
+        "keeps status.json up to date. Run it again to continue.",
+    )
+    p.add_argument("file", help="the campaign file (e.g. zoo/hopper.toml)")
+    p.add_argument("--out", help="its folder (default: beside the file, named after it)")
+    p.add_argument("--stage", choices=("all", "train", "evaluate"), default="all",
+                   help="only train, only evaluate finished runs, or both (default)")  # fmt: skip
+    p.add_argument("--max-runs", type=int, metavar="K", help="train at most K unfinished runs now")
+    p.add_argument("--status", action="store_true", help="print what is done and stop")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    _executor_arguments(p, workers=2)
+    p.set_defaults(func=_cmd_campaign)
+
+
+def _cmd_campaign(args: argparse.Namespace) -> int:
+    from advgame.campaign import load_campaign, run_campaign, write_status
+
+    campaign = load_campaign(args.file)
+    out = Path(args.out) if args.out else Path(args.file).with_suffix("")
+    if args.max_runs is not None and args.max_runs < 0:
+        raise ConfigError(f"--max-runs must be >= 0, got {args.max_runs}.")
+    if args.status:
+        out.mkdir(parents=True, exist_ok=True)
+        status = write_status(campaign, out)
+        for run, s in status["runs"].items():
+            print(f"{run}: {s['state']} ({s['iteration']}/{s['of']})")
+        print(f"evaluated: {', '.join(status['evaluated']) or 'none'}; table: {status['table']}")
+        return 0
+    path = run_campaign(
+        campaign, out, workers=args.workers, executor=args.executor, address=args.address,
+        stage=args.stage, max_runs=args.max_runs, progress=not args.no_progress,
+    )  # fmt: skip
+    print(f"campaign: {path}")
+    return 0
+
+
 def _psro_parser(sub: Any) -> None:
     """``advgame psro``: every `PSROConfig` field is an option."""
     from advgame.core.config import add_arguments
@@ -315,6 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_resume)
 
     _evaluate_parser(sub)
+    _campaign_parser(sub)
     _psro_parser(sub)
     p = sub.add_parser("report", help="rebuild the report (Markdown + PNG) of an evaluation folder")
     p.add_argument("folder", help="a folder written by `advgame evaluate` or `advgame demo`")

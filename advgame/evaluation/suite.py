@@ -76,6 +76,7 @@ def evaluate_policies(
     progress: bool = True,
     threat: str | None = None,
     optimal: OptimalSearch | None = None,
+    resume: bool = False,
 ) -> Path:
     """Evaluate fixed policies against chosen adversary columns; write the folder, return ``report.md``.
 
@@ -99,6 +100,9 @@ def evaluate_policies(
         optimal: search the learned optimal attack for every protagonist
             (`advgame.evaluation.optimal`): the ``attack optimal`` column, and the
             exploitability (nominal minus its return) in ``exploitability.json`` and the report.
+        resume: keep each finished unit of the table as a part file in ``out/parts`` and read
+            it back instead of playing it again (for folders whose protagonists never change,
+            such as a campaign's finished runs).
 
     """
     out = Path(out)
@@ -134,7 +138,7 @@ def evaluate_policies(
         agent = observation_agent(scenario, threat)
         jobs += optimal_jobs(scenario, threat, agent, protagonists, optimal, out, seeds=seed_list,
                              episodes=episodes)  # fmt: skip
-    table = evaluate(jobs, workers=workers, progress=progress)
+    table = evaluate(jobs, workers=workers, progress=progress, results_dir=out if resume else None)
     table.to_csv(out / "payoff.csv")
     if optimal is not None:
         _write_exploitability(out, table, threat, optimal.steps)
@@ -259,6 +263,7 @@ def evaluate_runs(
     budgets: Sequence[float] = BUDGETS,
     progress: bool = True,
     threat: str | None = None,
+    resume: bool = False,
 ) -> Path:
     """What ``advgame evaluate`` runs, through `evaluate_policies`; return ``report.md``.
 
@@ -291,7 +296,7 @@ def evaluate_runs(
     return evaluate_policies(
         sid, protagonists, out, adversaries=adversaries, runs={n: d for n, (_, d) in found.items()},
         last=last, sample=sample, seed=seed, seeds=seeds, episodes=episodes, workers=workers,
-        budgets=budgets, progress=progress, threat=threat, optimal=search,
+        budgets=budgets, progress=progress, threat=threat, optimal=search, resume=resume,
     )  # fmt: skip
 
 

@@ -1,0 +1,344 @@
+"""Campaigns: a grid of methods × seeds trained, evaluated in one threat model, and tabled.
+
+A campaign file (TOML) names a scenario, the methods (`advgame.training.METHODS`) and seeds,
+the training budget shared by every run and per method, and the evaluation (columns, seeds,
+the threat model, the optimal attack's budget)::
+
+    scenario = "Hopper-v5"
+    methods = ["ppo", "atla"]
+    seeds = [0, 1, 2]
+
+    [train]                    # TrainConfig fields for every run
+    iterations = 976
+    protagonist_steps = 2048
+
+    [train.atla]               # and for one method
+    adversary_steps = 2048
+
+    [evaluate]
+    adversaries = ["attacks"]  # column specs (advgame.evaluation.columns)
+    threat = "atla"
+    seeds = 10
+    exploitability = 0         # steps of the searched optimal attack (0: none)
+
+`run_campaign` trains every run that is not finished, two (``workers``) at a time as jobs on
+the executor (a local process pool or Ray); a run that was interrupted resumes from its last
+iteration, a finished one is never trained again. It then evaluates every finished run's
+final protagonist in one table (finished evaluation units are read back, not replayed) and
+writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-attacks
+return, the interquartile range and the 95 % interval over seeds of its natural and
+worst-of-attacks returns. ``status.json`` says at every step what is done.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from advgame.core.config import read_json, write_atomic
+from advgame.errors import ConfigError, FileFormatError
+
+__all__ = ["Campaign", "campaign_table", "load_campaign", "run_campaign"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A grid of methods × seeds on one scenario, and how it is evaluated."""
+
+    scenario: str
+    """Registered scenario id."""
+    methods: tuple[str, ...]
+    """Names in `advgame.training.METHODS`."""
+    seeds: tuple[int, ...]
+    """Training seeds of every method."""
+    train: Mapping[str, Any] = field(default_factory=dict)
+    """`TrainConfig` fields for every run."""
+    per_method: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    """`TrainConfig` fields for the runs of one method (over `train`)."""
+    adversaries: tuple[str, ...] = ("attacks",)
+    """Evaluation column specs."""
+    threat: str | None = None
+    """The table's threat model (None: `advgame.evaluation.columns.default_threat`)."""
+    eval_seeds: int = 5
+    """Evaluation seeds per cell."""
+    exploitability: int = 0
+    """Steps of each candidate of the searched optimal attack (0: no optimal column)."""
+
+    def __post_init__(self) -> None:
+        from advgame.training import METHODS
+
+        unknown = [m for m in self.methods if m not in METHODS]
+        if not self.methods or unknown:
+            raise ConfigError(
+                f"Campaign methods must be names of advgame.training.METHODS {sorted(METHODS)}, "
+                f"got {list(self.methods)!r}."
+            )
+        if not self.seeds or not all(type(s) is int and s >= 0 for s in self.seeds):
+            raise ConfigError(f"Campaign seeds must be ints >= 0, got {list(self.seeds)!r}.")
+        stray = set(self.per_method) - set(self.methods)
+        if stray:
+            raise ConfigError(f"[train.{sorted(stray)[0]}] names no method of the campaign.")
+        if type(self.eval_seeds) is not int or self.eval_seeds < 1:
+            raise ConfigError(f"evaluate.seeds must be an int >= 1, got {self.eval_seeds!r}.")
+        if type(self.exploitability) is not int or self.exploitability < 0:
+            raise ConfigError(
+                f"evaluate.exploitability must be an int >= 0, got {self.exploitability!r}."
+            )
+        for name in self.runs():  # every TrainConfig is checked before anything runs
+            self.config(name)
+
+    def runs(self) -> list[str]:
+        """Run names, ``METHOD-sSEED``, method by method."""
+        return [f"{m}-s{s}" for m in self.methods for s in self.seeds]
+
+    def config(self, run: str) -> Any:
+        """The `TrainConfig` of run ``METHOD-sSEED``."""
+        from advgame.training import METHODS, TrainConfig
+
+        method, _, seed = run.rpartition("-s")
+        fields = {**METHODS[method], **self.train, **self.per_method.get(method, {})}
+        try:
+            return TrainConfig(scenario=self.scenario, seed=int(seed), **fields)
+        except TypeError as exc:
+            raise ConfigError(
+                f"Run {run}: a [train] key is not a TrainConfig field ({exc})."
+            ) from None
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    """Read a campaign file (TOML; see the module doc)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"No campaign file at {path}.") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"The campaign file {path} is not valid TOML: {exc}.") from None
+    known = {"scenario", "methods", "seeds", "train", "evaluate"}
+    if set(data) - known:
+        raise ConfigError(f"{path}: unknown keys {sorted(set(data) - known)}; use {sorted(known)}.")
+    train = dict(data.get("train", {}))
+    methods = tuple(data.get("methods", ()))
+    per_method = {
+        m: train.pop(m) for m in list(train) if isinstance(train[m], dict) and m in methods
+    }
+    ev = dict(data.get("evaluate", {}))
+    unknown = set(ev) - {"adversaries", "threat", "seeds", "exploitability"}
+    if unknown:
+        raise ConfigError(f"{path}: unknown [evaluate] keys {sorted(unknown)}.")
+    return Campaign(
+        scenario=str(data.get("scenario", "")),
+        methods=methods,
+        seeds=tuple(data.get("seeds", (0,))),
+        train=train,
+        per_method=per_method,
+        adversaries=tuple(ev.get("adversaries", ("attacks",))),
+        threat=ev.get("threat"),
+        eval_seeds=ev.get("seeds", 5),
+        exploitability=ev.get("exploitability", 0),
+    )
+
+
+def _progress(run_dir: Path) -> int:
+    """The last finished iteration of a run (0: none)."""
+    if not (run_dir / "state.json").exists():
+        return 0
+    return int(read_json(run_dir / "state.json", "The run state", ("iteration",))["iteration"])
+
+
+def _train_unit(unit: tuple[Any, str]) -> str:
+    """Train or resume one run to its end (what a worker runs)."""
+    from advgame.training import resume, train
+
+    config, run_dir = unit
+    path = Path(run_dir)
+    if (path / "config.json").exists():
+        resume(path, progress=False)
+    else:
+        train(config, path, progress=False)
+    return run_dir
+
+
+def run_campaign(
+    campaign: Campaign,
+    out: str | Path,
+    *,
+    workers: int = 2,
+    executor: str = "local",
+    address: str | None = None,
+    stage: str = "all",
+    max_runs: int | None = None,
+    progress: bool = True,
+) -> Path:
+    """Train what is not finished, evaluate, write the table; return ``campaign.md``.
+
+    Args:
+        campaign: the grid.
+        out: its folder (``runs/``, ``results/``, ``status.json``, ``campaign.md``).
+        workers: training runs at once (local pool) or in flight (Ray); also the evaluation's.
+        executor: ``"local"`` or ``"ray"``.
+        address: a Ray cluster address.
+        stage: ``"train"``, ``"evaluate"`` (finished runs only) or ``"all"``.
+        max_runs: train at most this many unfinished runs now (the rest another time).
+        progress: progress bars for the evaluation.
+
+    """
+    from advgame.evaluation.executor import run_units
+
+    if stage not in ("train", "evaluate", "all"):
+        raise ConfigError(f"stage must be 'train', 'evaluate' or 'all', got {stage!r}.")
+    out = Path(out)
+    (out / "runs").mkdir(parents=True, exist_ok=True)
+    if stage in ("train", "all"):
+        todo = [
+            r for r in campaign.runs()
+            if _progress(out / "runs" / r) < campaign.config(r).iterations
+        ]  # fmt: skip
+        todo = todo[:max_runs] if max_runs is not None else todo
+        write_status(campaign, out, training=todo)
+        if todo:
+            log.info("campaign: training %d run(s): %s", len(todo), todo)
+            units = [(campaign.config(r), str(out / "runs" / r)) for r in todo]
+            run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
+                      address=address, max_retries=1)  # fmt: skip
+    status = write_status(campaign, out)
+    if stage == "train":
+        return out / "status.json"
+    done = [r for r, s in status["runs"].items() if s["state"] == "done"]
+    if not done:
+        raise ConfigError(f"No finished run in {out / 'runs'} to evaluate; train first.")
+    _evaluate(campaign, out, done, workers, executor, address, progress)
+    path = campaign_table(campaign, out)
+    write_status(campaign, out)
+    return path
+
+
+def _evaluate(
+    campaign: Campaign,
+    out: Path,
+    done: Sequence[str],
+    workers: int,
+    executor: str,
+    address: str | None,
+    progress: bool,
+) -> None:
+    """Every finished run's protagonist in one table (finished units are read back)."""
+    from advgame.evaluation import use_executor
+    from advgame.evaluation.suite import evaluate_runs
+
+    with use_executor(executor, address):
+        evaluate_runs(
+            [out / "runs" / r for r in done],
+            out / "results",
+            seeds=campaign.eval_seeds,
+            workers=workers,
+            exploitability_steps=campaign.exploitability,
+            adversaries=campaign.adversaries,
+            threat=campaign.threat,
+            budgets=(),
+            progress=progress,
+            resume=True,
+        )
+
+
+def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) -> dict[str, Any]:
+    """Write ``status.json``: each run's state and iteration, and the evaluation's."""
+    runs = {}
+    for r in campaign.runs():
+        it, of = _progress(out / "runs" / r), campaign.config(r).iterations
+        state = (
+            "done"
+            if it >= of
+            else ("training" if r in training else "partial" if it else "pending")
+        )
+        runs[r] = {"state": state, "iteration": it, "of": of}
+    table = out / "campaign.md"
+    status = {
+        "scenario": campaign.scenario,
+        "runs": runs,
+        "evaluated": sorted(_evaluated(out)),
+        "table": table.name if table.exists() else None,
+    }
+    write_atomic(out / "status.json", json.dumps(status, indent=2) + "\n")
+    return status
+
+
+def _evaluated(out: Path) -> set[str]:
+    """Runs that have rows in the campaign's payoff table."""
+    path = out / "results" / "payoff.csv"
+    if not path.exists():
+        return set()
+    from advgame.evaluation import PayoffTable
+
+    return set(PayoffTable.from_csv(path).protagonists)
+
+
+def campaign_table(campaign: Campaign, out: Path) -> Path:
+    """Write ``campaign.md`` and ``campaign.csv`` from the results; return the Markdown path."""
+    from advgame.evaluation import NOMINAL, PayoffTable, ci95
+
+    path = out / "results" / "payoff.csv"
+    if not path.exists():
+        raise FileFormatError(f"{path} is missing; evaluate the campaign first.")
+    metrics = {m["protagonist"]: m for m in PayoffTable.from_csv(path).metrics(nominal=NOMINAL)}
+    rows = []
+    for method in campaign.methods:
+        agents = [r for r in campaign.runs() if r.rpartition("-s")[0] == method and r in metrics]
+        if not agents:
+            continue
+        nat = np.array([metrics[a]["nominal"] for a in agents])
+        worst = np.array([metrics[a]["worst"] for a in agents])
+        median = agents[int(np.argsort(worst)[(len(agents) - 1) // 2])]
+        rows.append({
+            "method": method, "seeds": len(agents), "median_agent": median,
+            "natural": metrics[median]["nominal"], "worst": metrics[median]["worst"],
+            "worst_attack": metrics[median]["worst_adversary"],
+            "natural_iqr": _iqr(nat), "worst_iqr": _iqr(worst),
+            "natural_ci95": ci95(nat), "worst_ci95": ci95(worst),
+        })  # fmt: skip
+    csv_lines = [",".join(rows[0])] + [",".join(str(v) for v in r.values()) for r in rows]
+    (out / "campaign.csv").write_text("\n".join(csv_lines) + "\n")
+    md = out / "campaign.md"
+    md.write_text(_table_md(campaign, rows))
+    return md
+
+
+def _iqr(values: np.ndarray) -> str:
+    q1, q3 = np.percentile(values, [25, 75])
+    return f"{q1:.4g}–{q3:.4g}"
+
+
+def _fmt(v: Any) -> str:
+    return (
+        f"{v:.4g}"
+        if isinstance(v, float) and not math.isnan(v)
+        else ("–" if isinstance(v, float) else str(v))
+    )
+
+
+def _table_md(campaign: Campaign, rows: list[dict[str, Any]]) -> str:
+    head = "| method | seeds | median agent | natural | IQR | ±95 % | worst attack | worst | IQR | ±95 % |"
+    lines = [f"# Campaign: {campaign.scenario}", "", head, "|" + "---|" * 10]
+    for r in rows:
+        cells = [r["method"], r["seeds"], r["median_agent"], r["natural"], r["natural_iqr"],
+                 r["natural_ci95"], r["worst_attack"], r["worst"], r["worst_iqr"], r["worst_ci95"]]  # fmt: skip
+        lines.append("| " + " | ".join(_fmt(c) for c in cells) + " |")
+    lines += [
+        "",
+        "The median agent of a method is its run with the median worst-of-attacks return (the "
+        "lowest mean true return over the table's attack columns); natural is its nominal "
+        "return. IQR and ±95 % (Student t) are over the method's seeds. Data: "
+        "[results/payoff.csv](results/payoff.csv), the full report: "
+        "[results/report.md](results/report.md).",
+    ]
+    return "\n".join(lines) + "\n"
