@@ -6,6 +6,7 @@ Run ``advgame --help`` or ``advgame COMMAND --help``.
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import sys
 from collections.abc import Sequence
@@ -62,6 +63,25 @@ def _train_config(args: argparse.Namespace) -> Any:
         value = getattr(args, name, None)
         if value is not None:
             data[name] = value
+    for item in getattr(args, "adversary", None) or []:
+        agent, sep, spec = item.partition("=")
+        if not sep or not agent:
+            raise ConfigError(
+                f"--adversary {item!r} is not AGENT=SPEC (e.g. action_adversary=gauss:0.1)."
+            )
+        try:
+            parsed = json.loads(spec) if spec.lstrip().startswith("{") else spec
+        except json.JSONDecodeError as exc:
+            raise ConfigError(
+                f"--adversary {item!r}: the spec is not valid JSON ({exc})."
+            ) from None
+        data["adversaries"] = {**(data.get("adversaries") or {}), agent: parsed}
+    learned = data.get("learned")
+    fixed = set(data.get("adversaries") or {})
+    if learned and fixed & set(learned):
+        raise ConfigError(
+            f"Adversaries {sorted(fixed & set(learned))} are both fixed (--adversary) and learned."
+        )
     return override(from_dict(TrainConfig, data), args.set or [])
 
 
@@ -225,6 +245,14 @@ def _train_parser(sub: Any) -> None:
         help="start from a named method: " + "; ".join(f"{k}: {v}" for k, v in METHODS.items()),
     )
     p.add_argument("--config", help="a config.json to start from (e.g. from another run)")
+    p.add_argument(
+        "--adversary",
+        action="append",
+        metavar="AGENT=SPEC",
+        help="a fixed (not learned) adversary: gauss:STD, uniform:W, constant:V, random, zero, "
+        "mad, critic, rs, llm, or a JSON dict with 'kind' (advgame.adversaries.specs); repeat "
+        "for several agents",
+    )
     p.add_argument(
         "--run-dir", help="where the run is written (default runs/<scenario>-<method>-s<seed>)"
     )

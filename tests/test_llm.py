@@ -415,3 +415,31 @@ def test_the_prompt_reports_the_true_rewards(scripted: Callable[..., Scripted]) 
     assert f"The agent's true reward: {expected}" in prompt
     plain = spec.build(game.agent_info(ADVERSARY))  # not attached to a game: said so
     assert "The agent's true reward: unknown." in plain.prompt(game.observe(ADVERSARY))
+
+
+def test_a_config_naming_an_llm_adversary_trains_and_resumes(
+    scripted: Callable[..., Scripted], tmp_path: Path
+) -> None:
+    """The LLM plays inside the one loop from a config file (a JSON spec), and after resume."""
+    from advgame.training import TrainConfig, resume, train
+
+    server = scripted(lambda body: (200, "[" + ", ".join(["0.5"] * 11) + "]"))
+    llm = {"kind": "llm", "region": [0.2, 0.8], "history": 0,
+           "backend": {"kind": "openai", "base_url": server.url, "model": "scripted",
+                       "api_key_env": None}}  # fmt: skip
+    cfg = TrainConfig(
+        scenario="Hopper-v5", disruptors={"observation": {"eps": 0.8}}, learned=[],
+        adversaries={"observation_adversary": llm}, iterations=1, protagonist_steps=64,
+        adversary_steps=0, eval_episodes=0, protagonist_hparams={"n_steps": 32},
+    )  # fmt: skip
+    run = tmp_path / "run"
+    train(cfg, run, progress=False)
+    first = len(server.requests)
+    assert first > 0
+    saved = json.loads((run / "config.json").read_text())
+    assert saved["adversaries"]["observation_adversary"]["kind"] == "llm"
+    saved["iterations"] = 2
+    (run / "config.json").write_text(json.dumps(saved))
+    resume(run, progress=False)
+    assert len(server.requests) > first
+    assert json.loads((run / "state.json").read_text())["iteration"] == 2

@@ -97,6 +97,31 @@ class TrainConfig:
     """Episodes of the quick evaluation logged at every iteration."""
     seed: int = 0
     """Seeds models, environments and population sampling."""
+    disruptors: dict[str, Any] | None = None
+    """The run's disruptors as `advgame.make` takes them (``{kind: options}``, e.g.
+    ``{"observation": {"eps": 0.05}}``), instead of `preset`'s."""
+    task_options: dict[str, Any] | None = None
+    """Options of the task base, as `advgame.make`'s keywords (``max_episode_steps``, a safe
+    task's ``threshold``)."""
+    adversaries: dict[str, Any] | None = None
+    """Fixed (not learned) adversary policies by agent id, over the preset's own: text or dict
+    specs (`advgame.adversaries.specs`: ``"gauss:0.1"``, ``"random"``, ``"llm"``,
+    ``{"kind": "uniform", "low": -0.2, "high": 0.2}``). They play in both phases and are never
+    trained."""
+
+    def game_options(self) -> dict[str, Any]:
+        """`advgame.make`'s keywords for this run's game (``disruptors`` or ``preset``, task options)."""
+        base = (
+            {"disruptors": self.disruptors}
+            if self.disruptors is not None
+            else {"preset": self.preset}
+        )
+        return {**base, **(self.task_options or {})}
+
+    def fixed_adversaries(self) -> dict[str, Any]:
+        """The specs of `adversaries`, parsed (`advgame.adversaries.specs.adversary_spec`)."""
+        parse = load("advgame.adversaries.specs:adversary_spec")
+        return {agent: parse(spec) for agent, spec in (self.adversaries or {}).items()}
 
     def __post_init__(self) -> None:
         for name in ("iterations", "protagonist_steps", "n_envs", "snapshot_every"):
@@ -129,11 +154,13 @@ class TrainConfig:
             or not 0 < scale < math.inf
         ):
             raise ConfigError(f"train_budget_scale must be a number > 0, got {scale!r}.")
-        for name in ("protagonist_hparams", "adversary_hparams"):
+        for name in ("protagonist_hparams", "adversary_hparams", "disruptors", "task_options",
+                     "adversaries"):  # fmt: skip
             if getattr(self, name) is not None and not isinstance(getattr(self, name), dict):
                 raise ConfigError(
                     f"TrainConfig.{name} must be a dict, got {getattr(self, name)!r}."
                 )
+        self.fixed_adversaries()  # a malformed adversary spec fails here, before any run
 
 
 def learner_config(algo: str, overrides: dict[str, Any] | None) -> Any:

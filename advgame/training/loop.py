@@ -133,7 +133,7 @@ class Run:
         if not self.cfg.eval_episodes:
             return {}
         t = self.t
-        game = make(self.cfg.scenario, preset=self.cfg.preset, phase="eval")
+        game = make(self.cfg.scenario, **self.cfg.game_options(), phase="eval")
         seed = self.cfg.seed + 100_000 + it
         nominal = rollout(game, protagonists, seed=seed, episodes=self.cfg.eval_episodes)
         attackers = {
@@ -166,7 +166,7 @@ class Run:
 
     def _build_sides(self, folder: Path | None) -> None:
         t, cfg = self.t, self.cfg
-        game = make(cfg.scenario, preset=cfg.preset)
+        game = make(cfg.scenario, **cfg.game_options())
         placeholders = {
             p: ConstantPolicy(filler_action(game.action_space(p))) for p in t.protagonists
         }

@@ -52,7 +52,7 @@ class Trainer:
         self.cfg = config
         self.dir = Path(run_dir)
         self.progress = progress
-        probe = make(config.scenario, preset=config.preset)
+        probe = make(config.scenario, **config.game_options())
         self.protagonists: tuple[str, ...] = probe.protagonists
         self.team = config.protagonist_algo in TEAM_ALGOS
         if len(self.protagonists) > 1 and not self.team:
@@ -61,7 +61,16 @@ class Trainer:
                 f"protagonist_algo='mappo' or 'ippo', not {config.protagonist_algo!r}."
             )
         preset = probe.preset
-        self.fixed = dict(preset.adversaries) if preset is not None else {}
+        self.fixed = {
+            **(preset.adversaries if preset is not None else {}),
+            **config.fixed_adversaries(),
+        }
+        stray = set(self.fixed) - set(probe.adversaries)
+        if stray:
+            raise ConfigError(
+                f"adversaries names {sorted(stray)}, not adversaries of this game "
+                f"{list(probe.adversaries)}."
+            )
         self.learned = (
             list(config.learned)
             if config.learned is not None
@@ -77,7 +86,8 @@ class Trainer:
         self.train_kwargs = {
             "disruptors": [
                 scaled(d.spec, config.train_budget_scale) for d in probe.disruptors.values()
-            ]
+            ],
+            **(config.task_options or {}),
         }
         self.rng = np.random.default_rng(config.seed)
         self.population = Population()
