@@ -40,6 +40,8 @@ class Run:
         self.ckpt = self.dir / "checkpoints"
         self.prot_cfg = learner_config(self.cfg.protagonist_algo, self.cfg.protagonist_hparams)
         self.adv_cfg = learner_config(self.cfg.adversary_algo, self.cfg.adversary_hparams)
+        _warn_rollouts("protagonist", self.cfg.protagonist_steps, self.prot_cfg, self.cfg.n_envs)
+        _warn_rollouts("adversary", self.cfg.adversary_steps, self.adv_cfg, self.cfg.n_envs)
 
     def execute(self, fresh: bool) -> Path:
         """Run every remaining iteration; return the run directory."""
@@ -232,6 +234,19 @@ class Run:
         self._build_sides(self.dir / state["checkpoint"])
         log.info("resuming %s after iteration %d", self.dir, state["iteration"])
         return int(state["iteration"]) + 1
+
+
+def _warn_rollouts(side: str, steps: int, learner: Any, n_envs: int) -> None:
+    """Warn when a phase of `steps` is not whole on-policy rollouts (SB3 rounds each phase up)."""
+    n = getattr(learner, "n_steps", None)
+    if isinstance(n, int) and steps and steps % (n * n_envs):
+        log.warning(
+            "each %s phase asks for %d steps, but one rollout is n_envs x n_steps = %d x %d "
+            "steps, so it trains %d: set n_steps to steps / n_envs (e.g. %s_hparams "
+            '{"n_steps": %d})',
+            side, steps, n_envs, n, -(-steps // (n * n_envs)) * n * n_envs, side,
+            max(1, steps // n_envs),
+        )  # fmt: skip
 
 
 def _mean(values: list[float]) -> float:
