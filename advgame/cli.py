@@ -132,6 +132,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         seed=args.seed,
         budgets=BUDGETS if args.budgets is None else args.budgets,
         threat=args.threat,
+        zoo=args.zoo or [],
     )
     print(f"report: {out}")
     return 0
@@ -202,6 +203,7 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
         ("--raw-obs", "NAME", "checkpoint NAME was trained on raw observations (no normalizer)"),
         ("--callable", "NAME=MODULE:FUNCTION", "a plain function obs -> action as a protagonist"),
         ("--team", "NAME=PATH", "a MAPPO/IPPO <algo>_actors.pt as a protagonist team"),
+        ("--zoo", "ID", "a released zoo agent (advgame zoo list), e.g. hopper/ppo"),
     ):
         p.add_argument(flag, action="append", metavar=metavar, help=f"{text} (repeatable)")
     p.add_argument(
@@ -313,6 +315,9 @@ def _campaign_parser(sub: Any) -> None:
                    help="only train, only evaluate finished runs, or both (default)")  # fmt: skip
     p.add_argument("--max-runs", type=int, metavar="K", help="train at most K unfinished runs now")
     p.add_argument("--status", action="store_true", help="print what is done and stop")
+    p.add_argument("--release", metavar="ZOO", nargs="?", const="", default=None,
+                   help="after the table, copy each method's median agent into the zoo "
+                   "(default: the repository's zoo/) with its manifest entry")  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     _executor_arguments(p, workers=2)
     p.set_defaults(func=_cmd_campaign)
@@ -337,6 +342,38 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         stage=args.stage, max_runs=args.max_runs, progress=not args.no_progress,
     )  # fmt: skip
     print(f"campaign: {path}")
+    if args.release is not None and args.stage != "train":
+        from advgame.campaign import release_campaign
+
+        for e in release_campaign(campaign, out, args.release or None):
+            print(
+                f"released {e.id}: natural {e.natural_return:.1f}, worst {e.worst_attack_return:.1f}"
+            )
+    return 0
+
+
+def _zoo_parser(sub: Any) -> None:
+    p = sub.add_parser("zoo", help="the released agents: list the manifest")
+    p.add_argument("action", choices=("list",), help="list: print every released agent")
+    p.add_argument("--root", help="the zoo folder (default: $ADVGAME_ZOO or the repository's zoo/)")
+    p.set_defaults(func=_cmd_zoo)
+
+
+def _cmd_zoo(args: argparse.Namespace) -> int:
+    from advgame import zoo
+
+    root = Path(args.root) if args.root else zoo.default_root()
+    found = zoo.entries(root)
+    if not found:
+        print(f"no released agents in {root}")
+        return 0
+    print(
+        f"{'id':<22} {'scenario':<14} {'steps':>9} {'seed':>4} {'natural':>8} {'worst':>8}  worst attack"
+    )
+    for e in found:
+        zoo.verify(e, root)
+        print(f"{e.id:<22} {e.scenario:<14} {e.steps:>9} {e.seed:>4} {e.natural_return:>8.1f} "
+              f"{e.worst_attack_return:>8.1f}  {e.worst_attack} ({e.threat})")  # fmt: skip
     return 0
 
 
@@ -385,6 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     _evaluate_parser(sub)
     _campaign_parser(sub)
+    _zoo_parser(sub)
     _psro_parser(sub)
     p = sub.add_parser("report", help="rebuild the report (Markdown + PNG) of an evaluation folder")
     p.add_argument("folder", help="a folder written by `advgame evaluate` or `advgame demo`")

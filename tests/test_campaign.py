@@ -9,7 +9,7 @@ import pytest
 
 from advgame.campaign import load_campaign
 from advgame.cli import main
-from advgame.errors import ConfigError
+from advgame.errors import ConfigError, FileFormatError
 
 TINY = """
 scenario = "Hopper-v5"
@@ -86,3 +86,49 @@ def test_the_zoo_campaign_files_load() -> None:
     for path in sorted((Path(__file__).parent.parent / "zoo").glob("*.toml")):
         campaign = load_campaign(path)
         assert campaign.runs()
+
+
+def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from advgame import zoo
+
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(TINY.replace("seeds = [0, 1]", "seeds = [0]"))
+    root = tmp_path / "zoo"
+    args = ["campaign", str(spec), "--workers", "1", "--no-progress", "--release", str(root)]
+    assert main(args) == 0
+    found = {e.id: e for e in zoo.entries(root)}
+    assert set(found) == {"hopper/ppo", "hopper/atla"}
+    assert set(found["hopper/atla"].files) >= {"protagonist", "normalizer", "adversary"}
+    assert "adversary" not in found["hopper/ppo"].files  # PPO trained against nobody
+    for e in found.values():
+        zoo.verify(e, root)  # checksums match
+    capsys.readouterr()
+    assert main(["zoo", "list", "--root", str(root)]) == 0
+    assert "hopper/atla" in capsys.readouterr().out
+    monkeypatch.setenv("ADVGAME_ZOO", str(root))
+    out = tmp_path / "res"
+    assert main(["evaluate", "--zoo", "hopper/ppo", "--zoo", "hopper/atla", "--out", str(out),
+                 "--seeds", "1", "--workers", "1", "--adversaries", "nominal", "--budgets"]) == 0  # fmt: skip
+    assert "hopper/atla" in (out / "report.md").read_text()
+    (root / found["hopper/ppo"].files["protagonist"]["path"]).write_bytes(b"changed")
+    with pytest.raises(FileFormatError, match="sha256"):
+        zoo.load("hopper/ppo")
+
+
+def test_every_released_agent_matches_its_manifest_and_plays() -> None:
+    """The repository's zoo: checksums, and one short episode of each agent."""
+    import advgame
+    from advgame import zoo
+    from advgame.core.episodes import rollout
+
+    found = zoo.entries()
+    if not found:
+        pytest.skip(f"no agents released in {zoo.default_root()} yet")
+    for e in found:
+        spec = zoo.load(e.id)  # verifies the sha256 of every file
+        game = advgame.make(e.scenario, preset=e.threat, max_episode_steps=20)
+        [result] = rollout(game, {"protagonist": spec}, seed=0)
+        assert result.length >= 1
+        game.close()

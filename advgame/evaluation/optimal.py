@@ -93,7 +93,10 @@ def optimal_jobs(
     ``out/optimal.json`` (every candidate's settings and selection return, the one kept).
     """
     found = _search(scenario, threat, agent, protagonists, search, out)
-    record = {n: {"kept": str(f.spec.path), "candidates": f.candidates} for n, f in found.items()}
+    record = {
+        n: {"kept": f.spec.path, "kept_normalizer": f.spec.normalizer, "candidates": f.candidates}
+        for n, f in found.items()
+    }
     (out / "optimal.json").write_text(json.dumps(record, indent=2, default=str) + "\n")
     return [
         EvalJob(

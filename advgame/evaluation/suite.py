@@ -264,14 +264,20 @@ def evaluate_runs(
     progress: bool = True,
     threat: str | None = None,
     resume: bool = False,
+    zoo: Sequence[str] = (),
 ) -> Path:
     """What ``advgame evaluate`` runs, through `evaluate_policies`; return ``report.md``.
 
-    The protagonists are the runs' final ones plus fixed policies given as ``NAME=...``
-    strings (`cli_protagonists`); the scenario is `scenario` or the runs'.
+    The protagonists are the runs' final ones, released zoo agents (`zoo`: ids such as
+    ``hopper/ppo``, checked against the manifest) and fixed policies given as ``NAME=...``
+    strings (`cli_protagonists`); the scenario is `scenario`, the runs' or the zoo agents'.
     """
+    from advgame import zoo as zoo_
+
     found = {Path(r).name: (run_protagonist(Path(r)), Path(r)) for r in runs}
+    released = {z: (zoo_.entry(z), zoo_.load(z)) for z in zoo}
     scenarios = {str(cfg.scenario) for (cfg, _), _ in found.values()}
+    scenarios |= {e.scenario for e, _ in released.values()}
     scenarios |= {scenario} if scenario else set()
     if len(scenarios) > 1:
         raise ConfigError(
@@ -282,6 +288,7 @@ def evaluate_runs(
         raise ConfigError("Give --scenario ID or a run directory (its scenario is evaluated).")
     sid = str(scenarios.pop())
     protagonists: dict[str, Any] = {n: spec for n, ((_, spec), _) in found.items()}
+    protagonists.update({z: spec for z, (_, spec) in released.items()})
     extra = cli_protagonists(
         sid, checkpoints=checkpoints, normalizers=normalizers, raw_obs=raw_obs,
         callables=callables, teams=teams,

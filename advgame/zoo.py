@@ -1,0 +1,164 @@
+"""The zoo: released agents of finished campaigns, each with its files' checksums.
+
+A zoo is a folder with ``manifest.json`` and one folder per entry (``hopper/ppo/``): the
+campaign's median agent of a method (by worst-of-attacks return), its observation normalizer,
+and its strongest learned adversary when it has one. The manifest records, per entry, the
+scenario, method, training steps and seed, the run's config, the natural and worst-attack
+returns with the attack and threat model, and the sha256 of every file; `load` checks them.
+
+The repository's ``zoo/`` folder is the default zoo (``ADVGAME_ZOO`` names another)::
+
+    advgame zoo list
+    advgame evaluate --zoo hopper/ppo --adversaries attacks --out results/zoo
+    spec = advgame.zoo.load("hopper/ppo")       # an SB3Checkpoint spec, played like any other
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from advgame.core.config import read_json, write_atomic
+from advgame.errors import FileFormatError, UnknownNameError, did_you_mean
+
+__all__ = ["ZooEntry", "default_root", "entries", "entry", "load", "release", "verify"]
+
+MANIFEST = "manifest.json"
+
+
+def default_root() -> Path:
+    """``$ADVGAME_ZOO``, else the ``zoo/`` folder of the source checkout, else ``./zoo``."""
+    env = os.environ.get("ADVGAME_ZOO")
+    if env:
+        return Path(env)
+    checkout = Path(__file__).resolve().parent.parent / "zoo"
+    return checkout if checkout.is_dir() else Path("zoo")
+
+
+@dataclass(frozen=True)
+class ZooEntry:
+    """One released agent (a manifest entry)."""
+
+    id: str
+    """``ENV/METHOD``, e.g. ``"hopper/ppo"``."""
+    scenario: str
+    """The scenario it was trained and evaluated on."""
+    method: str
+    """The training method (`advgame.training.METHODS`)."""
+    steps: int
+    """Protagonist environment steps of its training."""
+    seed: int
+    """Its training seed."""
+    natural_return: float
+    """Mean true return, nominal, in its campaign's evaluation."""
+    worst_attack_return: float
+    """Mean true return under the strongest attack of that evaluation."""
+    worst_attack: str
+    """That attack's column."""
+    threat: str
+    """The threat model (preset) the attacks played in."""
+    algo: str = "ppo"
+    """The SB3 algorithm of the protagonist file."""
+    files: dict[str, dict[str, str]] = field(default_factory=dict)
+    """``{"protagonist" | "normalizer" | "adversary": {"path": relative path, "sha256": hex}}``."""
+    config: dict[str, Any] = field(default_factory=dict)
+    """The run's `TrainConfig` as saved."""
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def entries(root: str | Path | None = None) -> list[ZooEntry]:
+    """The entries of the zoo at `root` (default `default_root`); none if it has no manifest."""
+    root = Path(root) if root is not None else default_root()
+    if not (root / MANIFEST).exists():
+        return []
+    data = read_json(root / MANIFEST, "The zoo manifest", ("entries",))
+    try:
+        return [ZooEntry(**e) for e in data["entries"]]
+    except TypeError as exc:
+        raise FileFormatError(
+            f"The zoo manifest {root / MANIFEST} has an entry of another version ({exc})."
+        ) from None
+
+
+def entry(entry_id: str, root: str | Path | None = None) -> ZooEntry:
+    """The manifest entry `entry_id` of the zoo at `root` (default `default_root`)."""
+    return _entry(entry_id, Path(root) if root is not None else default_root())
+
+
+def _entry(entry_id: str, root: Path) -> ZooEntry:
+    found = {e.id: e for e in entries(root)}
+    if entry_id not in found:
+        raise UnknownNameError(
+            f"The zoo at {root} has no agent {entry_id!r}.{did_you_mean(entry_id, found)} "
+            f"Agents: {sorted(found) or 'none (advgame zoo list)'}."
+        )
+    return found[entry_id]
+
+
+def verify(entry: ZooEntry, root: Path) -> None:
+    """Raise `FileFormatError` unless every file of `entry` exists with its recorded sha256."""
+    for role, f in entry.files.items():
+        path = root / f["path"]
+        if not path.is_file():
+            raise FileFormatError(f"Zoo agent {entry.id!r}: its {role} file {path} is missing.")
+        if _sha256(path) != f["sha256"]:
+            raise FileFormatError(
+                f"Zoo agent {entry.id!r}: {path} does not match its sha256 in the manifest "
+                "(changed, truncated or from another release); restore it from the repository."
+            )
+
+
+def load(entry_id: str, root: str | Path | None = None, *, adversary: bool = False) -> Any:
+    """The released protagonist `entry_id` as a policy spec (or its strongest adversary).
+
+    The files are checked against the manifest's sha256 first.
+    """
+    from advgame.training.checkpoint import SB3Checkpoint
+
+    base = Path(root) if root is not None else default_root()
+    entry = _entry(entry_id, base)
+    verify(entry, base)
+    if adversary:
+        if "adversary" not in entry.files:
+            raise UnknownNameError(f"Zoo agent {entry_id!r} was released without an adversary.")
+        f = entry.files["adversary"]
+        norm = entry.files.get("adversary_normalizer")
+        return SB3Checkpoint(
+            str(base / f["path"]), "ppo", str(base / norm["path"]) if norm else None
+        )
+    norm = entry.files.get("normalizer")
+    return SB3Checkpoint(
+        str(base / entry.files["protagonist"]["path"]),
+        entry.algo,
+        str(base / norm["path"]) if norm else None,
+        deterministic=True,
+    )
+
+
+def release(entry: ZooEntry, sources: dict[str, Path], root: str | Path | None = None) -> ZooEntry:
+    """Copy `sources` (``{role: file}``) into the zoo under ``entry.id`` and record them.
+
+    Returns the entry with its files' relative paths and sha256; the manifest is rewritten
+    atomically (an entry of the same id is replaced).
+    """
+    base = Path(root) if root is not None else default_root()
+    folder = base / entry.id
+    folder.mkdir(parents=True, exist_ok=True)
+    files = {}
+    for role, src in sources.items():
+        dst = folder / f"{role}{''.join(Path(src).suffixes)}"
+        shutil.copyfile(src, dst)
+        files[role] = {"path": dst.relative_to(base).as_posix(), "sha256": _sha256(dst)}
+    done = ZooEntry(**{**asdict(entry), "files": files})
+    others = [asdict(e) for e in entries(base) if e.id != entry.id]
+    data = {"entries": sorted([*others, asdict(done)], key=lambda e: e["id"])}
+    write_atomic(base / MANIFEST, json.dumps(data, indent=2) + "\n")
+    return done
