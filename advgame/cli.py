@@ -171,7 +171,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from advgame.evaluation.suite import demo
+    from advgame.evaluation.demo import demo
 
     print(f"report: {demo(Path(args.out), quick=args.quick, workers=args.workers)}")
     return 0

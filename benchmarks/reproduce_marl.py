@@ -59,7 +59,8 @@ def _job(seed: int, condition: str, args: argparse.Namespace) -> dict[str, Any]:
 
     from advgame.adversaries import GaussianAdversary
     from advgame.core.registry import scenario_spec
-    from advgame.evaluation.suite import _train_or_resume, run_protagonist
+    from advgame.evaluation.demo import train_or_resume
+    from advgame.evaluation.suite import run_protagonist
     from advgame.training import TrainConfig
 
     logging.basicConfig(level=logging.WARNING)
@@ -77,7 +78,7 @@ def _job(seed: int, condition: str, args: argparse.Namespace) -> dict[str, Any]:
         seed=seed,
     )
     run_dir = Path(args.out) / "runs" / f"{condition}-s{seed}"
-    _train_or_resume(cfg, run_dir)
+    train_or_resume(cfg, run_dir)
     team = run_protagonist(run_dir)[1]
     fixed = dict(scenario_spec(args.scenario).load_presets()[preset].adversaries)
     row: dict[str, Any] = {}

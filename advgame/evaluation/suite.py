@@ -1,12 +1,12 @@
-"""Ready-made workflows: evaluate fixed policies against chosen adversaries, and the demo.
+"""Ready-made workflows: evaluate fixed policies against chosen adversaries, rebuild reports.
 
 `evaluate_policies` plays any protagonists (run finals, SB3 models trained elsewhere, teams,
 callables) against adversary columns named by specs (`advgame.evaluation.columns`: by default the nominal
 task, the paper's random attacks, a scheduled shift and every run's latest learned
 adversaries), with a budget sweep, and writes a results folder that stands on its own (run
 paths relative to it, training curves copied in) with a Markdown report. `evaluate_runs` is
-what ``advgame evaluate`` runs on top of it; `demo` trains PPO and ATLA-PPO briefly on
-Hopper-v5 and evaluates them the same way.
+what ``advgame evaluate`` runs on top of it; `report_folder` rebuilds a folder's report. The
+demo (`advgame.evaluation.demo`) trains PPO and ATLA-PPO briefly and evaluates them this way.
 """
 
 from __future__ import annotations
@@ -39,13 +39,11 @@ from advgame.evaluation.columns import (
 )
 from advgame.evaluation.optimal import OPTIMAL, OptimalSearch, optimal_jobs
 from advgame.evaluation.protagonists import check_protagonists, cli_protagonists, run_protagonist
-from advgame.training import TrainConfig
 
 __all__ = [
     "BUDGETS",
     "RANDOM",
     "SCHEDULED",
-    "demo",
     "evaluate_policies",
     "evaluate_runs",
     "report_folder",
@@ -391,63 +389,3 @@ def _exploit_md(results: dict[str, dict[str, Any]]) -> str:
             f"{int(r['best_response_steps'])} |"
         )
     return "\n".join(lines)
-
-
-def _train_or_resume(cfg: TrainConfig, run_dir: Path) -> None:
-    from advgame.training import resume, train
-
-    if (run_dir / "state.json").exists():
-        state = json.loads((run_dir / "state.json").read_text())
-        if state["iteration"] >= cfg.iterations:
-            log.info("%s is complete; reusing it", run_dir)
-            return
-        resume(run_dir)
-    elif (run_dir / "config.json").exists():
-        resume(run_dir)
-    else:
-        train(cfg, run_dir)
-
-
-def demo(out: Path, quick: bool = False, workers: int = 2) -> Path:
-    """Train PPO and ATLA-PPO on Hopper-v5 briefly, evaluate both, write the report.
-
-    The columns are the default ones (nominal, the paper's random attacks, a scheduled shift,
-    the learned adversary) and the white-box attacks, all in the ``atla`` threat model.
-
-    Interrupted demos pick up where they stopped (finished runs are reused). `quick` shrinks
-    everything to a smoke test.
-    """
-    from advgame.training import METHODS
-
-    if quick:
-        sizes: dict[str, Any] = {
-            "iterations": 2,
-            "protagonist_steps": 256,
-            "adversary_steps": 256,
-            "protagonist_hparams": {"n_steps": 128},
-            "adversary_hparams": {"n_steps": 128},
-            "eval_episodes": 1,
-        }
-    else:
-        sizes = {
-            "iterations": 8,
-            "protagonist_steps": 2048,
-            "adversary_steps": 1024,
-            "adversary_hparams": {"n_steps": 1024},
-            "eval_episodes": 2,
-        }
-    runs = []
-    for method in ("ppo", "atla"):
-        cfg = TrainConfig(scenario="Hopper-v5", seed=0, **{**sizes, **METHODS[method]})
-        run_dir = out / "runs" / method
-        _train_or_resume(cfg, run_dir)
-        runs.append(run_dir)
-    return evaluate_runs(
-        runs,
-        out,
-        seeds=2 if quick else 3,
-        episodes=1,
-        workers=workers,
-        # today's columns and the worst-of-attacks suite (a small Robust Sarsa critic when quick)
-        adversaries=("default", "attacks,samples=1000,epochs=2" if quick else "attacks"),
-    )
