@@ -147,3 +147,39 @@ def test_any_command_line_is_accepted_or_a_clear_error(
         os.chdir(before)
     assert code in (0, 1, 2)
     assert not math.isnan(float(code))
+
+
+TRAIN_FIELDS = [
+    "scenario", "preset", "learned", "protagonist_algo", "adversary_algo", "protagonist_hparams",
+    "iterations", "protagonist_steps", "adversary_steps", "sampling", "train_budget_scale",
+    "n_envs", "vec_env", "seed", "disruptors", "task_options", "adversaries", "bogus",
+]  # fmt: skip
+
+
+@settings(max_examples=int(os.environ.get("FUZZ_EXAMPLES", 150)), deadline=None)
+@given(st.dictionaries(st.sampled_from(TRAIN_FIELDS), VALUES, max_size=4))
+def test_any_train_config_dict_is_accepted_or_a_clear_error(data: dict[str, Any]) -> None:
+    """What a config.json or --set can hold: `from_dict` builds it or names what is wrong."""
+    from advgame.core.config import from_dict
+    from advgame.training import TrainConfig
+
+    try:
+        from_dict(TrainConfig, data)
+    except AdvgameError as exc:
+        assert str(exc)
+
+
+JOB_FIELDS = ["make_kwargs", "protagonist", "adversary", "adversary_specs", "seeds", "episodes",
+              "tags"]  # fmt: skip
+
+
+@settings(max_examples=int(os.environ.get("FUZZ_EXAMPLES", 150)), deadline=None)
+@given(st.dictionaries(st.sampled_from(JOB_FIELDS), VALUES, max_size=4))
+def test_any_eval_job_is_accepted_or_a_clear_error(data: dict[str, Any]) -> None:
+    from advgame.evaluation import EvalJob
+
+    fields = {"scenario": "Hopper-v5", "protagonist": "p", "protagonist_spec": abs, **data}
+    try:
+        EvalJob(**fields)
+    except AdvgameError as exc:
+        assert str(exc)

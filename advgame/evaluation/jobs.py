@@ -45,8 +45,9 @@ def _check_spec(spec: Any, what: str) -> None:
 
 def _seeds(seeds: Any, episodes: int) -> tuple[int, ...]:
     try:
-        out = tuple(operator.index(s) for s in ((seeds,) if np.ndim(seeds) == 0 else seeds))
-    except TypeError:
+        scalar = isinstance(seeds, (int, np.integer)) and not isinstance(seeds, bool)
+        out = tuple(operator.index(s) for s in ((seeds,) if scalar else seeds))
+    except (TypeError, ValueError):
         raise ConfigError(f"seeds must be ints, got {seeds!r}; e.g. seeds=(0, 1, 2).") from None
     if not out or min(out) < 0 or len(set(out)) != len(out):
         raise ConfigError(f"seeds must be distinct ints >= 0, got {seeds!r}; e.g. (0, 1, 2).")

@@ -141,7 +141,8 @@ class TrainConfig:
                     f"TrainConfig.{name} must be one of {allowed}, got {getattr(self, name)!r}."
                 )
         if self.learned is not None and (
-            isinstance(self.learned, str) or not all(isinstance(a, str) for a in self.learned)
+            not isinstance(self.learned, (list, tuple))
+            or not all(isinstance(a, str) for a in self.learned)
         ):
             raise ConfigError(
                 f"TrainConfig.learned must be None or a list of adversary ids, got {self.learned!r}"
