@@ -379,7 +379,7 @@ def release_campaign(
             steps=cfg.protagonist_steps * cfg.iterations + cfg.warmup_steps, seed=cfg.seed,
             natural_return=float(row["natural"]), worst_attack_return=float(row["worst"]),
             worst_attack=row["worst_attack"], threat=campaign.threat or "default",
-            algo=cfg.protagonist_algo, config=read_json(run / "config.json", "The run config"),
+            algo=spec.algo, config=read_json(run / "config.json", "The run config"),
         )  # fmt: skip
         released.append(release(entry, sources, root))
     return released

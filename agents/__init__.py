@@ -7,7 +7,7 @@ if __name__ != "advgame.agents":  # pragma: no cover - packaging guard
     )
 
 from advgame.agents.marl import MARL_LEARNERS, IPPOConfig, MAPPOConfig, TeamLearner
-from advgame.agents.sb3 import LEARNERS, PPOConfig, SACConfig, TD3Config
+from advgame.agents.sb3 import LEARNERS, PPOConfig, SACConfig, SAPPOConfig, TD3Config
 
 __all__ = [
     "LEARNERS",
@@ -16,6 +16,7 @@ __all__ = [
     "MAPPOConfig",
     "PPOConfig",
     "SACConfig",
+    "SAPPOConfig",
     "TD3Config",
     "TeamLearner",
 ]

@@ -54,9 +54,11 @@ def run_protagonist(run_dir: Path) -> tuple[Any, Any]:
         path = folder / f"{cfg.protagonist_algo}_actors.pt"
         return cfg, team_protagonist(cfg.scenario, path, preset=cfg.preset)
     norm = folder / "protagonist_obs_norm.npz"
+    from advgame.training import learner_config
+
     spec = SB3Checkpoint(
         str(folder / "protagonist.zip"),
-        cfg.protagonist_algo,
+        learner_config(cfg.protagonist_algo, cfg.protagonist_hparams).algo,  # its file's format
         str(norm) if norm.exists() else None,
         deterministic=True,
     )

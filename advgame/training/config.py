@@ -35,6 +35,18 @@ METHODS: dict[str, dict[str, Any]] = {
     "ppo": {"preset": "default", "learned": [], "train_budget_scale": 1.0},
     "atla": {"preset": "atla", "learned": None, "train_budget_scale": 1.0},
     "rarl": {"preset": "rarl", "learned": None, "train_budget_scale": 0.5},
+    "sa-ppo": {
+        "preset": "default",
+        "learned": [],
+        "train_budget_scale": 1.0,
+        "protagonist_algo": "sa-ppo",
+    },
+    "atla-sa": {
+        "preset": "atla",
+        "learned": None,
+        "train_budget_scale": 1.0,
+        "protagonist_algo": "sa-ppo",
+    },
     **{
         algo: {
             "preset": "default",
@@ -46,8 +58,10 @@ METHODS: dict[str, dict[str, Any]] = {
     },
 }
 """Named starting points: plain PPO on the nominal task, ATLA (learned observation attack in
-normalized units), RARL (learned forces, trained at half the bound, tested at full), and the
-constrained learners on a safe scenario (``--preset`` picks the in-training disruption)."""
+normalized units), RARL (learned forces, trained at half the bound, tested at full), SA-PPO
+(nominal training with the state-adversarial regulariser, `advgame.agents.SAPPOConfig`),
+ATLA-SA (ATLA's alternation with an SA-PPO protagonist), and the constrained learners on a
+safe scenario (``--preset`` picks the in-training disruption)."""
 
 
 @dataclass(frozen=True)
@@ -61,11 +75,12 @@ class TrainConfig:
     learned: list[str] | None = None
     """Adversary agents trained in the adversary phase (None: every adversary the preset gives
     no fixed policy; []: none, i.e. plain training against fixed or no-op adversaries)."""
-    protagonist_algo: Literal["ppo", "sac", "td3", "mappo", "ippo", "ppo-lag", "crpo", "pcrpo"] = (
-        "ppo"
-    )
-    """Protagonist learner: SB3 PPO/SAC/TD3 for one protagonist, MAPPO/IPPO for a team, or a
-    constrained learner (PPO-Lagrangian, CRPO, PCRPO) on a safe scenario."""
+    protagonist_algo: Literal[
+        "ppo", "sa-ppo", "sac", "td3", "mappo", "ippo", "ppo-lag", "crpo", "pcrpo"
+    ] = "ppo"
+    """Protagonist learner: SB3 PPO/SAC/TD3 or SA-PPO (PPO with the state-adversarial
+    regulariser) for one protagonist, MAPPO/IPPO for a team, or a constrained learner
+    (PPO-Lagrangian, CRPO, PCRPO) on a safe scenario."""
     adversary_algo: Literal["ppo", "sac"] = "ppo"
     """Learner of each learned adversary."""
     protagonist_hparams: dict[str, Any] | None = None

@@ -220,7 +220,9 @@ class Side:
         stats = folder / f"{agent}_vecnormalize.pkl"
         if stats.exists():
             venv = VecNormalize.load(str(stats), venv)
-        model = _algo_class(learner.algo).load(
+        model_class = getattr(learner, "model_class", None)
+        cls_ = model_class() if model_class is not None else _algo_class(learner.algo)
+        model = cls_.load(
             folder / f"{agent}.zip", env=venv, device="cpu", tensorboard_log=tensorboard_log
         )
         replay = folder / f"{agent}_replay.pkl"

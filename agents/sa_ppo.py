@@ -1,0 +1,176 @@
+"""SA-PPO: PPO with the state-adversarial regulariser of Zhang et al. 2020 (NeurIPS).
+
+The policy is asked to act alike on every observation in a small ball around each state it
+was trained on: each minibatch update adds
+
+    κ · mean_s max_{ŝ ∈ B_ε(s)} KL(π(·|s) ‖ π(·|ŝ))
+
+to PPO's loss. The inner maximisation runs projected signed-gradient steps (PGD, from a
+uniform random start in the ball) for the whole minibatch at once: one forward and backward
+pass per step over ``[batch, obs]``, with ``π(·|s)`` held fixed; the regulariser is then
+differentiated with respect to the policy's parameters at the ``ŝ`` found. The ball is L∞ and
+lives in the units the budget is given in: ``"normalized"`` (ATLA's budgets: the policy's input
+behind `VecNormalize`, so ε applies to it directly) or ``"raw"`` (ε divided by the normalizer's
+std per dimension), the same conventions as `advgame.ObservationDisruptor`. ε grows linearly
+from 0 to its full value over the first ``sa_ramp`` of the run's steps, as in SA-PPO.
+
+`SAPPO` is an SB3 `PPO` whose update (``train``) is written here with that extra term; it
+saves and loads as a PPO (a released SA-PPO agent plays as a plain PPO checkpoint).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3 import PPO
+from stable_baselines3.common.utils import explained_variance
+from torch.nn import functional as F
+
+__all__ = ["SAPPO", "sa_regulariser"]
+
+
+def _kl(policy: Any, obs: torch.Tensor, reference: Any) -> torch.Tensor:
+    """``KL(reference ‖ π(·|obs))`` per row (a Gaussian: summed over action dimensions)."""
+    dist = policy.get_distribution(obs).distribution
+    kl = torch.distributions.kl_divergence(reference, dist)
+    return kl.sum(-1) if kl.dim() > 1 else kl
+
+
+def sa_regulariser(
+    policy: Any,
+    obs: torch.Tensor,
+    eps: torch.Tensor,
+    steps: int,
+    low: float = -np.inf,
+    high: float = np.inf,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(mean KL at the ŝ found, ŝ)``: the SA regulariser of a minibatch, differentiable in θ.
+
+    Args:
+        policy: an SB3 actor-critic policy (``get_distribution``).
+        obs: the minibatch of policy inputs ``[batch, obs]``.
+        eps: the L∞ radius per input dimension (a tensor broadcastable to `obs`).
+        steps: PGD steps; 0 keeps the random start.
+        low: the lower end of the range inputs are clipped to (VecNormalize's ``-clip_obs``).
+        high: its upper end (``clip_obs``).
+
+    """
+    with torch.no_grad():
+        clean = policy.get_distribution(obs).distribution
+        reference = type(clean)(clean.mean.detach(), clean.stddev.detach())
+    if not torch.any(eps > 0):
+        return torch.zeros((), dtype=obs.dtype), obs
+    step = 2.5 * eps / max(steps, 1)  # the walk can cross the ball 2.5 times (Madry et al.)
+    delta = (torch.rand_like(obs) * 2 - 1) * eps
+    for _ in range(steps):
+        delta.requires_grad_(True)
+        x = torch.clamp(obs + delta, low, high)
+        (grad,) = torch.autograd.grad(_kl(policy, x, reference).sum(), delta)
+        delta = torch.max(torch.min(delta.detach() + step * grad.sign(), eps), -eps)
+    attacked = torch.clamp(obs + delta.detach(), low, high)
+    return _kl(policy, attacked, reference).mean(), attacked
+
+
+class SAPPO(PPO):
+    """SB3 PPO plus the state-adversarial regulariser (see the module doc).
+
+    Args:
+        sa_kappa: κ, the regulariser's weight (SA-PPO/ATLA configs: 0.1).
+        sa_eps: ε, the full L∞ radius, in `sa_space` units.
+        sa_steps: PGD steps of the inner maximisation (SA-PPO: 10).
+        sa_ramp: fraction of `sa_total_steps` over which ε grows from 0 (SA-PPO: 0.75).
+        sa_space: ``"normalized"`` or ``"raw"`` (see the module doc).
+        sa_total_steps: the run's planned steps (for the ramp).
+        *args, **kwargs: SB3 `PPO`'s.
+
+    """
+
+    def __init__(
+        self,
+        *args: Any,
+        sa_kappa: float = 0.1,
+        sa_eps: float = 0.075,
+        sa_steps: int = 10,
+        sa_ramp: float = 0.75,
+        sa_space: str = "normalized",
+        sa_total_steps: int = 1,
+        **kwargs: Any,
+    ) -> None:
+        self.sa_kappa, self.sa_eps, self.sa_steps = sa_kappa, sa_eps, sa_steps
+        self.sa_ramp, self.sa_space, self.sa_total_steps = sa_ramp, sa_space, sa_total_steps
+        super().__init__(*args, **kwargs)
+
+    def sa_radius(self) -> torch.Tensor:
+        """ε now (ramped), per policy-input dimension."""
+        frac = self.num_timesteps / max(self.sa_total_steps * self.sa_ramp, 1)
+        eps = self.sa_eps * min(1.0, frac) if self.sa_ramp > 0 else self.sa_eps
+        size = int(np.prod(self.observation_space.shape or ()))
+        radius = np.full(size, eps, dtype=np.float32)
+        rms = getattr(self.get_vec_normalize_env(), "obs_rms", None)
+        if self.sa_space == "raw" and rms is not None:
+            radius = radius / np.sqrt(rms.var + 1e-8).astype(np.float32)
+        return torch.as_tensor(radius)
+
+    def _clip_range(self) -> float:
+        norm = self.get_vec_normalize_env()
+        return float(norm.clip_obs) if norm is not None else np.inf
+
+    def train(self) -> None:
+        """One PPO update over the rollout buffer, with the SA regulariser on each minibatch."""
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        clip = self.clip_range(self._current_progress_remaining)  # type: ignore[operator]
+        radius, bound = self.sa_radius(), self._clip_range()
+        logs: dict[str, list[float]] = {
+            k: [] for k in ("pg", "value", "entropy", "sa", "kl", "clip")
+        }
+        for _epoch in range(self.n_epochs):
+            for batch in self.rollout_buffer.get(self.batch_size):
+                actions = batch.actions
+                if isinstance(self.action_space, spaces.Discrete):
+                    actions = actions.long().flatten()
+                values, log_prob, entropy = self.policy.evaluate_actions(
+                    batch.observations, actions
+                )
+                adv = batch.advantages
+                if self.normalize_advantage and len(adv) > 1:
+                    adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+                ratio = torch.exp(log_prob - batch.old_log_prob)
+                surrogate = torch.min(adv * ratio, adv * torch.clamp(ratio, 1 - clip, 1 + clip))
+                pg_loss = -surrogate.mean()
+                value_loss = F.mse_loss(batch.returns, values.flatten())
+                entropy_loss = -torch.mean(entropy if entropy is not None else -log_prob)
+                sa, _ = sa_regulariser(
+                    self.policy, batch.observations, radius, self.sa_steps, -bound, bound
+                )
+                loss = pg_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss
+                loss = loss + self.sa_kappa * sa
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+                self.policy.optimizer.step()
+                with torch.no_grad():
+                    log_ratio = log_prob - batch.old_log_prob
+                    logs["kl"].append(float(torch.mean((torch.exp(log_ratio) - 1) - log_ratio)))
+                    logs["clip"].append(float(torch.mean((torch.abs(ratio - 1) > clip).float())))
+                for key, value in (
+                    ("pg", pg_loss),
+                    ("value", value_loss),
+                    ("entropy", entropy_loss),
+                    ("sa", sa),
+                ):
+                    logs[key].append(float(value.detach()))
+            self._n_updates += 1
+        explained = explained_variance(
+            self.rollout_buffer.values.flatten(), self.rollout_buffer.returns.flatten()
+        )
+        for key, name in (("pg", "policy_gradient_loss"), ("value", "value_loss"),
+                          ("entropy", "entropy_loss"), ("sa", "sa_regulariser"),
+                          ("kl", "approx_kl"), ("clip", "clip_fraction")):  # fmt: skip
+            self.logger.record(f"train/{name}", float(np.mean(logs[key])))
+        self.logger.record("train/sa_eps", float(radius.max()))
+        self.logger.record("train/explained_variance", float(explained))
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
