@@ -14,6 +14,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from advgame.core.episodes import build_policies, reseed_policies
 from advgame.core.game import Game, Move
@@ -53,7 +54,8 @@ class SingleAgentView(gym.Env):
             raise ConfigError(
                 f"{agent!r} is the learner of this view; do not pass a policy for it."
             )
-        probe = {agent: _Placeholder(), **others}
+        self._learner = _Placeholder()
+        probe = {agent: self._learner, **others}
         self.policies = {a: p for a, p in build_policies(game, probe).items() if a != agent}
         disruptor = game.disruptors.get(agent)
         if disruptor is not None and not disruptor.schedule.in_phase(game.phase):
@@ -193,7 +195,7 @@ class SingleAgentView(gym.Env):
             raise ConfigError(
                 f"{self.agent!r} is the learner of this view; do not pass a policy for it."
             )
-        probe = {self.agent: _Placeholder(), **{a: p for a, p in self.policies.items()}, **policies}
+        probe = {self.agent: self._learner, **{a: p for a, p in self.policies.items()}, **policies}
         built = build_policies(self.game, probe)
         for a in policies:
             self.policies[a] = built[a]
@@ -202,6 +204,14 @@ class SingleAgentView(gym.Env):
     def set_observation_scale(self, target: str, std: Any) -> None:
         """Set the normalizer std of `target` for normalized-space observation budgets."""
         self.game.set_observation_scale(target, std)
+
+    def bind_learner(self, model: Any, normalizer: Any = None) -> None:
+        """Let attacks embedded in this view attack the live learner (`model`, behind `normalizer`).
+
+        Only attacks read it (white-box observation attacks on the learner's observations);
+        the learner's own actions still come from SB3.
+        """
+        self._learner.model, self._learner.normalizer = model, normalizer
 
     def render(self) -> Any:
         """Render the game's task base."""
@@ -231,7 +241,19 @@ class _Tally:
 
 
 class _Placeholder:
-    """Stands in for the learner while the other agents' policies are built."""
+    """Stands in for the learner while the other agents' policies are built.
+
+    It is also a white-box view of the learner (`advgame.core.policy.WhiteBox`), so an
+    observation attack embedded in the view can attack the policy being trained: adversarial
+    training on the current policy (Pattanaik et al. 2018). `SingleAgentView.bind_learner`
+    binds the live SB3 model and its `VecNormalize` once they exist; PPO does not change its
+    weights while it collects a rollout, so every rollout is attacked against the policy as it
+    stands for that rollout.
+    """
+
+    def __init__(self) -> None:
+        self.model: Any = None
+        self.normalizer: Any = None
 
     def reset(self, seed: int | None = None) -> None:
         """Unused."""
@@ -239,6 +261,57 @@ class _Placeholder:
     def act(self, observation: Any) -> Any:
         """Unused."""
         raise AssertionError("the learner's placeholder policy is never queried")
+
+    def _policy_input(self, obs: Any) -> Any:
+        """Raw observations -> the learner's network input (its normalizer, as it is now)."""
+        import torch
+
+        if self.model is None:
+            raise ConfigError(
+                "An attack on the learner played before the learner was bound; train through "
+                "advgame's loop (Side binds it), or call view.bind_learner(model, venv)."
+            )
+        self.model.policy.set_training_mode(False)
+        rms = getattr(self.normalizer, "obs_rms", None)
+        if rms is None or not getattr(self.normalizer, "norm_obs", True):
+            return obs
+        mean = torch.as_tensor(rms.mean, dtype=torch.float32)
+        std = torch.as_tensor(np.sqrt(rms.var + self.normalizer.epsilon), dtype=torch.float32)
+        clip = float(self.normalizer.clip_obs)
+        return ((obs - mean) / std).clamp(-clip, clip)
+
+    def action_mean(self, obs: Any) -> Any:
+        """The learner's current mean action (a Gaussian policy's mean)."""
+        dist = self.model_policy().get_distribution(self._policy_input(obs)).distribution
+        return dist.mean
+
+    def action_std(self) -> Any:
+        """The learner's current state-independent action std."""
+        log_std = getattr(self.model_policy(), "log_std", None)
+        return None if log_std is None else log_std.detach().exp()
+
+    def value(self, obs: Any) -> Any:
+        """The learner's current value estimate (a zero batch before it is bound)."""
+        import torch
+
+        if self.model is None:  # asked by an attack's check at build time: PPO has a value head
+            return torch.zeros(obs.shape[0])
+        return self.model_policy().predict_values(self._policy_input(obs)).squeeze(-1)
+
+    def q_value(self, obs: Any, action: Any) -> Any:
+        """``None``: on-policy learners (PPO) have no Q critic."""
+        return None
+
+    def model_policy(self) -> Any:
+        """The bound model's policy (a clear error before binding)."""
+        if self.model is None:
+            self._policy_input(None)
+        if not hasattr(self.model.policy, "get_distribution"):
+            raise ConfigError(
+                f"Adversarial training on the current policy needs an on-policy Gaussian learner "
+                f"(PPO); this learner is {type(self.model).__name__}."
+            )
+        return self.model.policy
 
 
 def _build_view(

@@ -41,6 +41,12 @@ METHODS: dict[str, dict[str, Any]] = {
         "train_budget_scale": 1.0,
         "protagonist_algo": "sa-ppo",
     },
+    "pgd-at": {
+        "preset": "atla",
+        "learned": [],
+        "train_budget_scale": 1.0,
+        "adversaries": {"observation_adversary": "mad"},
+    },
     "atla-sa": {
         "preset": "atla",
         "learned": None,
@@ -60,7 +66,8 @@ METHODS: dict[str, dict[str, Any]] = {
 """Named starting points: plain PPO on the nominal task, ATLA (learned observation attack in
 normalized units), RARL (learned forces, trained at half the bound, tested at full), SA-PPO
 (nominal training with the state-adversarial regulariser, `advgame.agents.SAPPOConfig`),
-ATLA-SA (ATLA's alternation with an SA-PPO protagonist), and the constrained learners on a
+ATLA-SA (ATLA's alternation with an SA-PPO protagonist), PGD-AT (adversarial training on the
+current policy: a MAD attack on the learner itself during every rollout), and the constrained learners on a
 safe scenario (``--preset`` picks the in-training disruption)."""
 
 

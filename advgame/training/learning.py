@@ -140,6 +140,15 @@ class Side:
         self.model = model or learner.make_model(venv, seed, total_steps, tensorboard_log)
         if model is None:
             self.venv.seed(seed)
+        self._bind()
+
+    def _bind(self) -> None:
+        """Give in-process views the live model, so attacks on the learner can read it."""
+        from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+
+        base = self.venv.venv if isinstance(self.venv, VecNormalize) else self.venv
+        if not isinstance(base, SubprocVecEnv):  # worker processes cannot see this model
+            base.env_method("bind_learner", self.model, self.venv if self.normalized else None)
 
     @property
     def steps(self) -> int:
