@@ -117,10 +117,10 @@ class RobustSarsaAttack(_Attack):
             )
 
     # -- the attack ----------------------------------------------------------------------
-    def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
-        """Minus the learned ``Q^π(s, π(s + δ))``."""
+    def row_objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
+        """Per row, minus the learned ``Q^π(s, π(s + δ))``."""
         critic = _CRITICS[_key_of(victim)]
-        return -critic(clean, victim.action_mean(attacked)).sum()
+        return -critic(clean, victim.action_mean(attacked))
 
     def build(self, info: Any) -> WhiteBoxAttackPolicy:
         """The attack for observation adversary `info.agent`; it learns ``Q^π`` when attached."""

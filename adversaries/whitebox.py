@@ -26,9 +26,9 @@ the disruptor still clips and counts. Gradients are taken with respect to ``u`` 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -81,9 +81,18 @@ class _Attack:
                 f"2.5 / steps), got {self.step_size!r}."
             )
 
-    def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
-        """What the attack maximises (a scalar tensor)."""
+    rowwise: ClassVar[bool] = True
+    """Whether `row_objective` scores each row on its own (then N games attack in one batch)."""
+
+    def row_objective(
+        self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor
+    ) -> torch.Tensor:
+        """What the attack maximises, per row of the batch (``[batch]``)."""
         raise NotImplementedError
+
+    def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
+        """What the attack maximises over the batch (a scalar tensor: the rows' sum)."""
+        return self.row_objective(victim, clean, attacked).sum()
 
     def check_victim(self, agent: str, victim: WhiteBox, probe: torch.Tensor) -> None:
         """Raise if `victim` lacks what this attack differentiates (`probe`: a zero batch)."""
@@ -123,8 +132,10 @@ class MADAttack(_Attack):
 
     """
 
-    def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
-        """The KL (or squared distance) between the clean and the attacked action."""
+    def row_objective(
+        self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor
+    ) -> torch.Tensor:
+        """Per row, the KL (or squared distance) between the clean and the attacked action."""
         import torch
 
         with torch.no_grad():
@@ -132,8 +143,8 @@ class MADAttack(_Attack):
         diff = victim.action_mean(attacked) - reference
         std = victim.action_std()
         if std is None:
-            return (diff * diff).sum()
-        return (diff * diff / (2.0 * std * std)).sum()
+            return (diff * diff).sum(-1)
+        return (diff * diff / (2.0 * std * std)).sum(-1)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -144,12 +155,14 @@ class CriticAttack(_Attack):
     action the perturbation induces. With a value head only (PPO) it minimises ``V(s+δ)``.
     """
 
-    def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
-        """Minus the critic's estimate."""
+    def row_objective(
+        self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor
+    ) -> torch.Tensor:
+        """Per row, minus the critic's estimate."""
         q = victim.q_value(clean, victim.action_mean(attacked))
         if q is not None:
-            return -q.sum()
-        return -victim.value(attacked).sum()
+            return -q
+        return -victim.value(attacked)
 
     def check_victim(self, agent: str, victim: WhiteBox, probe: torch.Tensor) -> None:
         """The victim must have a critic (SB3 policies do; MAPPO/IPPO actor files do not)."""
@@ -179,6 +192,7 @@ class PGDAttack(_Attack):
     """
 
     objective_fn: Objective
+    rowwise: ClassVar[bool] = False  # a user's objective is one scalar: each game attacks alone
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -246,85 +260,129 @@ class WhiteBoxAttackPolicy:
         if seed is not None:
             self.rng = np.random.default_rng(seed)
 
+    @property
+    def batch_key(self) -> tuple | None:
+        """Equal for attacks that one batched walk may serve (`act_group`), else None.
+
+        The same attack spec on the same disruptor layout, against victims that are copies of
+        one frozen network (equal ``batch_key``s): then every game's rows go through one
+        projected-gradient walk over ``[N, k]``. A user's `PGDAttack` objective is one scalar,
+        so each game then attacks alone.
+        """
+        if not self.spec.rowwise or self.game is None:
+            return None
+        d = self.disruptor
+        keys = tuple(getattr(self.victims.get(t), "batch_key", None) for t in d.targets)
+        if any(k is None for k in keys):
+            return None
+        return ("whitebox", self.spec, tuple(d.targets), d.norm, keys)
+
     def act(self, observation: Any) -> np.ndarray:
         """Attack every target's true observation; return the adversary action ``u``."""
-        if self.game is None:
-            raise ConfigError(
-                f"{type(self.spec).__name__} was not attached to a game; play it through "
-                "advgame.rollout / evaluation (build_policies attaches it)."
-            )
-        out = [self._attack(target) for target in self.disruptor.targets]
-        return np.concatenate(out).astype(np.float32)
+        return self.act_group([self], [observation])[0]
+
+    @staticmethod
+    def act_group(policies: Sequence[WhiteBoxAttackPolicy], observations: Any) -> np.ndarray:
+        """The actions of several attacks of one `batch_key` (one game each), in one walk.
+
+        Row ``i`` is what ``policies[i].act`` plays alone: its random starts come from its own
+        generator in the same order, and every row's steps, projections and best iterate are
+        computed row by row in the same float64 arithmetic; only the network passes are shared.
+        """
+        for pol in policies:
+            if pol.game is None:
+                raise ConfigError(
+                    f"{type(pol.spec).__name__} was not attached to a game; play it through "
+                    "advgame.rollout / evaluation (build_policies attaches it)."
+                )
+        head = policies[0]
+        blocks = [head._attack_rows(policies, t) for t in head.disruptor.targets]
+        return np.concatenate(blocks, axis=1).astype(np.float32)
 
     def objective_of(self, target: str, u: np.ndarray) -> float:
         """The attack's objective at action block `u` for `target` (for tests and reports)."""
         import torch
 
-        clean, perturb = self._problem(target)
+        clean, perturb = self._problem([self], target)
         with torch.enable_grad():  # objectives may differentiate internally (e.g. a critic's)
-            u_t = torch.as_tensor(np.asarray(u, dtype=np.float32))
+            u_t = torch.as_tensor(np.asarray(u, dtype=np.float32).reshape(1, -1))
             return float(self.spec.objective(self.victims[target], clean, perturb(u_t)).detach())
 
-    def _problem(self, target: str) -> tuple[Any, Any]:
-        """`target`'s clean observation batch and ``u -> perturbed batch``.
+    def _problem(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> tuple[Any, Any]:
+        """The clean observation rows ``[N, n]`` of `target` in each game, and ``u -> perturbed``.
 
-        ``u`` is `target`'s block of the adversary action, scaled by its block of the
-        disruptor's budget (current ε ⊙ normalizer scale). The perturbed observation is clipped
-        into the observation space, as the game clips it.
+        ``u`` (``[N, k]``) is `target`'s block of each adversary action, scaled by that game's
+        block of its disruptor's budget (current ε ⊙ normalizer scale). The perturbed
+        observations are clipped into the observation space, as the game clips them.
         """
         import torch
 
-        assert self.game is not None  # act() checked
         d = self.disruptor
         start = sum(d.dims[t].size for t in d.targets[: d.targets.index(target)])
-        unit = d.unit[start : start + d.dims[target].size]
+        stop = start + d.dims[target].size
         space = d.spaces[target]
-        true_obs = self.game.true_observation(target)
-        clean = torch.as_tensor(np.asarray(true_obs, dtype=np.float32).reshape(1, -1))
-        index = torch.as_tensor(self.disruptor.dims[target], dtype=torch.long)
-        scale = torch.as_tensor(unit, dtype=torch.float32)
+        rows = []
+        for pol in policies:
+            assert pol.game is not None  # act_group checked
+            rows.append(np.asarray(pol.game.true_observation(target), dtype=np.float32).reshape(-1))
+        clean = torch.as_tensor(np.stack(rows))
+        scale = torch.as_tensor(
+            np.stack([pol.disruptor.unit[start:stop] for pol in policies]), dtype=torch.float32
+        )
+        index = torch.as_tensor(d.dims[target], dtype=torch.long)
         low = torch.as_tensor(space.low.reshape(-1), dtype=torch.float32)
         high = torch.as_tensor(space.high.reshape(-1), dtype=torch.float32)
 
         def perturb(u: torch.Tensor) -> torch.Tensor:
-            delta = torch.zeros_like(clean[0]).index_add(0, index, scale * u)
+            delta = torch.zeros_like(clean).index_add(1, index, scale * u)
             return torch.maximum(torch.minimum(clean + delta, high), low)
 
         return clean, perturb
 
-    def _attack(self, target: str) -> np.ndarray:
-        """Projected gradient ascent from random starts; the best iterate of every walk."""
+    def _attack_rows(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> np.ndarray:
+        """Projected gradient ascent from random starts for every game; each row's best iterate."""
         import torch
 
-        victim, size = self.victims[target], self.disruptor.dims[target].size
-        clean, perturb = self._problem(target)
-        best_u, best = np.zeros(size), -np.inf
+        victim, size, n = self.victims[target], self.disruptor.dims[target].size, len(policies)
+        clean, perturb = self._problem(policies, target)
+        best_u, best = np.zeros((n, size)), np.full(n, -np.inf)
         with torch.enable_grad():
             for _ in range(1 + self.spec.restarts):
-                u = self._project(self.rng.uniform(-1.0, 1.0, size))
+                u = self._project(np.stack([p.rng.uniform(-1.0, 1.0, size) for p in policies]))
                 for step in range(self.spec.steps + 1):
                     u_t = torch.as_tensor(u, dtype=torch.float32).requires_grad_(True)
-                    value = self.spec.objective(victim, clean, perturb(u_t))
-                    if float(value.detach()) > best:
-                        best_u, best = u, float(value.detach())
+                    values = self._values(victim, clean, perturb(u_t))
+                    scores = values.detach().numpy().astype(np.float64)
+                    better = scores > best
+                    best_u[better], best[better] = u[better], scores[better]
                     if step == self.spec.steps:
                         break
-                    (grad,) = torch.autograd.grad(value, u_t)
+                    (grad,) = torch.autograd.grad(values.sum(), u_t)
                     u = self._project(u + self.alpha * self._direction(grad.numpy()))
         return best_u
 
+    def _values(self, victim: Any, clean: Any, attacked: Any) -> Any:
+        """The objective per row (``[N]``); an attack scored as one scalar plays one row."""
+        if self.spec.rowwise:
+            return self.spec.row_objective(victim, clean, attacked)
+        return self.spec.objective(victim, clean, attacked).reshape(1)
+
     def _direction(self, grad: np.ndarray) -> np.ndarray:
-        """Steepest ascent for the ball: the gradient's sign (L∞) or its direction (L2)."""
+        """Steepest ascent for the ball, per row: the gradient's sign (L∞) or direction (L2)."""
         if self.disruptor.norm == "linf":
             return np.sign(grad)
-        norm = float(np.linalg.norm(grad))
-        return grad / norm if norm > 0 else grad
+        out = grad.astype(np.float64)
+        for i, row in enumerate(grad):  # row by row: the norm a lone game computes
+            norm = float(np.linalg.norm(row))
+            out[i] = row / norm if norm > 0 else row
+        return out
 
     def _project(self, u: np.ndarray) -> np.ndarray:
-        """Onto the adversary's budget: the unit box (L∞) or the unit ball (L2)."""
+        """Each row onto the adversary's budget: the unit box (L∞) or the unit ball (L2)."""
         u = np.clip(u, -1.0, 1.0)
         if self.disruptor.norm == "l2":
-            norm = float(np.linalg.norm(u))
-            if norm > _RADIUS:  # a hair inside, so the float32 action stays in the ball
-                u = u * (_RADIUS / norm)
+            for i, row in enumerate(u):
+                norm = float(np.linalg.norm(row))
+                if norm > _RADIUS:  # a hair inside, so the float32 action stays in the ball
+                    u[i] = row * (_RADIUS / norm)
         return u

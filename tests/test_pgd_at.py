@@ -24,13 +24,13 @@ def test_the_attack_reads_the_live_learner_and_collection_leaves_it_unchanged(
 ) -> None:
     torch.set_num_threads(1)
     seen: list[Any] = []
-    objective = MADAttack.objective
+    objective = MADAttack.row_objective
 
     def spy(self: MADAttack, victim: Any, clean: Any, attacked: Any) -> Any:
         seen.append(victim.model)
         return objective(self, victim, clean, attacked)
 
-    monkeypatch.setattr(MADAttack, "objective", spy)
+    monkeypatch.setattr(MADAttack, "row_objective", spy)
     fns = [view_factory("Hopper-v5", "protagonist", {"observation_adversary": MADAttack(steps=2)},
                         preset="atla") for _ in range(2)]  # fmt: skip
     side = Side("protagonist", PPOConfig(n_steps=64, batch_size=32, n_epochs=1), fns, 0, 256)

@@ -171,7 +171,8 @@ def _batch_keys(policies: Mapping[str, Policy]) -> dict[str, Any]:
     """Per agent: what its policy is grouped by (its ``batch_key``, or itself if it has none)."""
     out = {}
     for a, p in policies.items():
-        key = getattr(p, "batch_key", None) if hasattr(p, "act_batch") else None
+        grouped = hasattr(p, "act_batch") or hasattr(p, "act_group")
+        key = getattr(p, "batch_key", None) if grouped else None
         out[a] = (a, key) if key is not None else (a, id(p))
     return out
 
@@ -197,8 +198,12 @@ def _batched_actions(
         if len(rows) == 1:
             out[j0][a0] = policies[live[j0]][a0].act(obs0)
             continue
-        head: Any = policies[live[j0]][a0]  # has act_batch: its batch key is not None
-        acts = head.act_batch(np.array([r[2] for r in rows]))  # = np.stack, faster
+        head: Any = policies[live[j0]][a0]  # has act_batch or act_group: a batch key
+        obs = np.array([r[2] for r in rows])  # = np.stack, faster
+        if hasattr(head, "act_group"):  # each game's own policy state (white-box attacks)
+            acts = head.act_group([policies[live[j]][a] for j, a, _ in rows], obs)
+        else:
+            acts = head.act_batch(obs)
         for (j, a, _), action in zip(rows, acts, strict=True):
             out[j][a] = action
     return out

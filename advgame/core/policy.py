@@ -165,16 +165,17 @@ def act_batch(policies: Sequence[Any], observations: Sequence[Any]) -> Sequence[
 
     Policies that expose an equal, non-None ``batch_key`` and an ``act_batch(obs[n, ...])``
     are served by one `act_batch` call of the first (e.g. N views of one frozen SB3 network);
-    any other policy is asked one observation at a time.
+    policies whose state differs per game (a white-box attack bound to its game) offer
+    ``act_group(policies, obs[n, ...])`` instead; any other policy is asked one observation at
+    a time.
     """
     if len(policies) == 1:
         return [policies[0].act(observations[0])]
     head = policies[0]
     key = getattr(head, "batch_key", None)
-    if (
-        key is not None
-        and hasattr(head, "act_batch")
-        and all(getattr(p, "batch_key", None) == key for p in policies[1:])
-    ):
-        return head.act_batch(np.array(observations))  # = np.stack for equal shapes, faster
+    if key is not None and all(getattr(p, "batch_key", None) == key for p in policies[1:]):
+        if hasattr(head, "act_group"):  # policies with state per game (white-box attacks)
+            return head.act_group(policies, np.array(observations))
+        if hasattr(head, "act_batch"):
+            return head.act_batch(np.array(observations))  # = np.stack for equal shapes
     return [p.act(o) for p, o in zip(policies, observations, strict=True)]
