@@ -10,6 +10,7 @@ __all__ = [
     "AdvgameError",
     "BudgetError",
     "ConfigError",
+    "FileFormatError",
     "MissingExtraError",
     "UnknownNameError",
     "UnknownScenarioError",
@@ -23,6 +24,20 @@ class AdvgameError(Exception):
 
 class ConfigError(AdvgameError, ValueError):
     """A configuration value (disruptor, schedule, preset, learner) is invalid."""
+
+
+class FileFormatError(AdvgameError, ValueError):
+    """A file advgame wrote (run, checkpoint, normalizer, population, results) cannot be read.
+
+    The message names the file, says whether it looks empty, truncated, not of its format or
+    written by another version, and how to recover (rerun the step that wrote it, or delete
+    the folder). Bad *values* a user typed are `ConfigError`s.
+    """
+
+    def __init__(self, message: str, path: str | None = None) -> None:
+        super().__init__(message)
+        self.path = path
+        """The file that failed to load."""
 
 
 class BudgetError(ConfigError):

@@ -16,6 +16,7 @@ import json
 import os
 import textwrap
 import typing
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -65,8 +66,24 @@ def to_dict(cfg: Any) -> dict[str, Any]:
 
 
 def from_dict(cls: type[T], data: dict[str, Any]) -> T:
-    """Build config `cls` from a dict, naming unknown keys with a suggestion."""
-    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    """Build config `cls` from a dict, naming unknown keys with a suggestion.
+
+    Raises:
+        ConfigError: `data` is not a mapping, names an unknown option or lacks a required one.
+
+    """
+    fields = dataclasses.fields(cls)  # type: ignore[arg-type]
+    names = {f.name for f in fields}
+    if not isinstance(data, Mapping):
+        raise ConfigError(
+            f"{cls.__name__} options must be a mapping {{option: value}}, got {data!r}. "
+            f"Options: {sorted(names)}."
+        )
+    required = [f.name for f in fields if f.init and _required(f) and f.name not in data]
+    if required:
+        raise ConfigError(
+            f"{cls.__name__} needs the option(s) {required}, got only {sorted(data)}."
+        )
     for key in data:
         if key not in names:
             raise ConfigError(
@@ -76,6 +93,10 @@ def from_dict(cls: type[T], data: dict[str, Any]) -> T:
     hints = typing.get_type_hints(cls)
     values = {k: _coerce(hints[k], v) for k, v in data.items()}
     return cls(**values)
+
+
+def _required(f: dataclasses.Field[Any]) -> bool:
+    return f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
 
 
 def _coerce(hint: Any, value: Any) -> Any:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from advgame.core.config import from_dict
 from advgame.core.schedule import Schedule
 from advgame.disruptors.action import ActionDisruptor
 from advgame.disruptors.arm import ArmDisruptor
@@ -61,21 +62,32 @@ def from_config(kind: str, config: Mapping[str, Any] | DisruptorSpec) -> Disrupt
     """
     if isinstance(config, DisruptorSpec):
         return config
+    if not isinstance(kind, str) or kind not in [*KINDS, "cost"]:
+        raise UnknownNameError(
+            f"Unknown disruptor kind {kind!r}.{did_you_mean(str(kind), KINDS)} Known kinds: "
+            f"{sorted([*KINDS, 'cost'])}."
+        )
+    if not isinstance(config, Mapping):
+        raise ConfigError(
+            f"The options of a {kind!r} disruptor must be a dict (e.g. {{}} for the defaults, "
+            f'{{"schedule": {{"every": 10}}}}), or a list of dicts for several, got {config!r}.'
+        )
     cfg = dict(config)
     if kind == "cost":
         kind, cfg = "reward", {**cfg, "signal": "cost"}
-    if kind not in KINDS:
-        raise UnknownNameError(
-            f"Unknown disruptor kind {kind!r}.{did_you_mean(kind, KINDS)} Known kinds: "
-            f"{sorted([*KINDS, 'cost'])}."
-        )
     if isinstance(cfg.get("schedule"), Mapping):
-        cfg["schedule"] = Schedule(**cfg["schedule"])
-    if kind == "dynamics" and "params" in cfg:
-        cfg["params"] = tuple(p if isinstance(p, Param) else Param(**p) for p in cfg["params"])
-    if kind == "workspace" and "shifts" in cfg:
-        cfg["shifts"] = tuple(s if isinstance(s, Shift) else Shift(**s) for s in cfg["shifts"])
-    try:
-        return KINDS[kind](**cfg)
-    except TypeError as exc:
-        raise ConfigError(f"Bad options for a {kind!r} disruptor: {exc}.") from None
+        cfg["schedule"] = from_dict(Schedule, cfg["schedule"])
+    if kind == "dynamics" and _is_list(cfg.get("params")):
+        cfg["params"] = tuple(_nested(Param, p) for p in cfg["params"])
+    if kind == "workspace" and _is_list(cfg.get("shifts")):
+        cfg["shifts"] = tuple(_nested(Shift, s) for s in cfg["shifts"])
+    return from_dict(KINDS[kind], cfg)
+
+
+def _is_list(value: Any) -> bool:
+    return isinstance(value, (list, tuple))
+
+
+def _nested(cls: type[Any], value: Any) -> Any:
+    """A `Param` or `Shift` given as itself or as a dict of its fields."""
+    return value if isinstance(value, cls) else from_dict(cls, value)
