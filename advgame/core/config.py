@@ -131,12 +131,20 @@ def save_json(cfg: Any, path: str | Path) -> None:
 
 
 def load_json(cls: type[T], path: str | Path) -> T:
-    """Read a config from JSON written by `save_json` (or by hand)."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"Cannot read config {path}: {exc}") from exc
-    return from_dict(cls, data)
+    """Read a config from JSON written by `save_json` (or by hand).
+
+    Raises:
+        ConfigError: no file at `path`, or a value in it is invalid.
+        FileFormatError: the file is empty, truncated or not a JSON object.
+
+    """
+    from advgame.core.files import read_json
+
+    fix = (
+        f"Fix or delete {path}; `advgame train --help` lists every {cls.__name__} field, and "
+        "a run writes its config.json when it starts."
+    )
+    return from_dict(cls, read_json(path, f"{cls.__name__} file", fix, kind=dict))
 
 
 def override(cfg: T, assignments: list[str]) -> T:

@@ -108,7 +108,7 @@ def read_json(path: str | Path, what: str, fix: str, kind: type = object) -> Any
 
 
 def read_csv(path: str | Path, what: str, fix: str, columns: Sequence[str]) -> list[dict[str, str]]:
-    """The rows of CSV file `path`; every row must have a value in each of `columns`."""
+    """The rows of CSV file `path`: every row has every cell, and a value in each of `columns`."""
     with reading(path, what, fix) as p, p.open(newline="") as f:
         rows = list(csv.DictReader(f))
     missing = [c for c in columns if not rows or c not in rows[0]]
@@ -119,7 +119,8 @@ def read_csv(path: str | Path, what: str, fix: str, columns: Sequence[str]) -> l
             path=str(path),
         )
     for i, row in enumerate(rows, start=2):
-        if None in row or any(row.get(c) in (None, "") for c in columns):
+        cut = None in row or any(v is None for v in row.values())  # too many or too few cells
+        if cut or any(row.get(c) == "" for c in columns):
             raise FileFormatError(
                 f"The {what} {path} has a short or broken row on line {i}; it looks truncated. "
                 f"{fix}",

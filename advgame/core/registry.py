@@ -210,6 +210,11 @@ def list_scenarios(family: str | None = None) -> list[str]:
 def scenario_spec(scenario_id: str) -> ScenarioSpec:
     """The `ScenarioSpec` of `scenario_id`, with a "did you mean" for typos."""
     _ensure_builtin()
+    if not isinstance(scenario_id, str):
+        raise UnknownScenarioError(
+            f"A scenario id is a string such as 'Hopper-v5', got {scenario_id!r}. "
+            "advgame.list_scenarios() (or `advgame list`) shows every id."
+        )
     try:
         return _REGISTRY[scenario_id]
     except KeyError:

@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from advgame.errors import ConfigError, did_you_mean
+from advgame.core.files import read_csv, read_json, reading, require
+from advgame.errors import ConfigError, FileFormatError, did_you_mean
 
 __all__ = ["COLUMNS", "NOMINAL", "PayoffTable", "ci95", "cvar", "degradation", "worst_case"]
 
@@ -26,6 +27,13 @@ COLUMNS: tuple[str, ...] = ("scenario", "protagonist", "adversary", "seed", "epi
 COLUMNS += ("true_return", "observed_return", "cost", "payoff", "length", "clipped", "terminated")
 """The columns of every row (`advgame.core.episodes.EpisodeResult`, clips summed); tags add more."""
 _INT, _STR = {"seed", "episode", "length", "clipped"}, {"scenario", "protagonist", "adversary"}
+_KEYS = ("protagonist", "adversary", "seed", "true_return")
+"""Columns a payoff file must give on every row to be read back."""
+RESULTS_FIX = (
+    "Run `advgame evaluate` again with the same --out (it rewrites the results), or delete "
+    "the folder."
+)
+"""How to recover from a damaged results file."""
 # Student t 0.975 quantiles for df = 1..30 (95 % two-sided intervals); 1.96 beyond.
 _T975: tuple[float, ...] = (
     12.706,
@@ -271,10 +279,15 @@ class PayoffTable:
 
     @classmethod
     def from_csv(cls, path: str | Path) -> PayoffTable:
-        """Read a table written by `to_csv` (numbers parsed back; empty cells dropped)."""
-        with Path(path).open(newline="") as f:
-            rows = list(csv.DictReader(f))
-        return cls({k: _parse(k, v) for k, v in r.items() if v != ""} for r in rows)
+        """Read a table written by `to_csv` (numbers parsed back; empty cells dropped).
+
+        Raises:
+            FileFormatError: the file is empty, cut short, or lacks the key columns.
+
+        """
+        rows = read_csv(path, "payoff table", RESULTS_FIX, columns=_KEYS)
+        with reading(path, "payoff table", RESULTS_FIX):
+            return cls({k: _parse(k, v) for k, v in r.items() if v != ""} for r in rows)
 
     def to_json(self, path: str | Path) -> Path:
         """Write ``{"columns": [...], "rows": [...]}`` as JSON; return the path."""
@@ -285,5 +298,22 @@ class PayoffTable:
 
     @classmethod
     def from_json(cls, path: str | Path) -> PayoffTable:
-        """Read a table written by `to_json`."""
-        return cls(json.loads(Path(path).read_text())["rows"])
+        """Read a table written by `to_json`.
+
+        Raises:
+            FileFormatError: the file is empty, truncated, or not a payoff table.
+
+        """
+        data = read_json(path, "payoff table", RESULTS_FIX, kind=dict)
+        require(data, ("rows",), path, "payoff table", RESULTS_FIX)
+        rows = data["rows"]
+        if not isinstance(rows, list) or not all(
+            isinstance(r, dict) and all(k in r for k in _KEYS) for r in rows
+        ):
+            raise FileFormatError(
+                f"The payoff table {path} has rows without {list(_KEYS)}: written by another "
+                f"version of advgame or another program. {RESULTS_FIX}",
+                path=str(path),
+            )
+        with reading(path, "payoff table", RESULTS_FIX):
+            return cls(rows)

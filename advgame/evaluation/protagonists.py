@@ -10,7 +10,6 @@ evaluate`` options into the same specs.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -42,6 +41,7 @@ def run_protagonist(run_dir: Path) -> tuple[Any, Any]:
     """
     from advgame.core.config import load_json
     from advgame.training import TEAM_ALGOS, TrainConfig
+    from advgame.training.loop import read_state
 
     state_path = run_dir / "state.json"
     if not state_path.exists():
@@ -49,7 +49,7 @@ def run_protagonist(run_dir: Path) -> tuple[Any, Any]:
             f"{run_dir} has no finished iteration (no state.json); train or resume it."
         )
     cfg = load_json(TrainConfig, run_dir / "config.json")
-    folder = run_dir / json.loads(state_path.read_text())["checkpoint"]
+    folder = run_dir / read_state(run_dir)["checkpoint"]
     if cfg.protagonist_algo in TEAM_ALGOS:
         path = folder / f"{cfg.protagonist_algo}_actors.pt"
         return cfg, team_protagonist(cfg.scenario, path, preset=cfg.preset)

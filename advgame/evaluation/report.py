@@ -9,7 +9,6 @@ Plots use matplotlib's non-interactive Agg backend, imported only when a figure 
 
 from __future__ import annotations
 
-import csv
 import logging
 import math
 import os
@@ -19,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.files import read_csv, read_json
 from advgame.errors import ConfigError
 from advgame.evaluation import NOMINAL, PayoffTable, ci95
 
@@ -144,8 +144,8 @@ def _read_progress(path: str | Path) -> dict[str, np.ndarray]:
         except ValueError:
             return math.nan
 
-    with Path(path).open(newline="") as f:
-        rows = list(csv.DictReader(f))
+    fix = "It is rewritten by the run's next iteration (`advgame resume`), or delete the run."
+    rows = read_csv(path, "progress file", fix, columns=())
     keys = list(dict.fromkeys(k for r in rows for k in r))
     return {k: np.array([num(r.get(k)) for r in rows]) for k in keys}
 
@@ -225,14 +225,13 @@ def plot_safety(table: PayoffTable, path: str | Path, limit: float) -> Path:
 
 def runs_cost_limit(run_dirs: Iterable[str | Path]) -> float | None:
     """The cost limit the runs' constrained learners trained with (the smallest), if any."""
-    import json
-
     limits = []
     for d in run_dirs:
         path = Path(d) / "config.json"
         if not path.exists():
             continue
-        cfg = json.loads(path.read_text())
+        fix = "Every run writes its config.json when it starts: rerun it, or delete the folder."
+        cfg = read_json(path, "run config", fix, kind=dict)
         hparams = cfg.get("protagonist_hparams") or {}
         if "cost_limit" in hparams:
             limits.append(float(hparams["cost_limit"]))
@@ -393,10 +392,10 @@ def meta_game_section(meta: Sequence[Mapping[str, Any]]) -> str:
 
 def write_meta_report(run_dir: str | Path) -> Path:
     """Write ``report.md`` of a PSRO run directory (its meta-game section); return its path."""
-    import json
+    from advgame.psro import load_meta
 
     run_dir = Path(run_dir)
-    meta = json.loads((run_dir / "meta.json").read_text())
+    meta = load_meta(run_dir)
     text = f"# Population training: {run_dir.name}\n\n" + meta_game_section(meta)
     path = run_dir / "report.md"
     path.write_text(text + "\n")

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from advgame.core.config import write_atomic
+from advgame.core.files import read_json, reading
 from advgame.core.registry import load
 from advgame.errors import ConfigError
 
@@ -201,9 +202,11 @@ class Population:
     @classmethod
     def load(cls, path: str | Path) -> Population:
         """Read a population file."""
-        try:
-            data = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ConfigError(f"Cannot read population {path}: {exc}") from exc
+        fix = (
+            f"It is rewritten by the run that owns it: resume or rerun that run, or delete "
+            f"{Path(path).parent} and train again."
+        )
+        data = read_json(path, "population file", fix, kind=list)
         base = Path(path).parent
-        return cls([Member.from_dict(d, base) for d in data])
+        with reading(path, "population file", fix):
+            return cls([Member.from_dict(d, base) for d in data])
