@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import json
 import pickle
 import zipfile
@@ -47,14 +48,14 @@ def diagnose(path: str | Path, exc: BaseException | None = None) -> str:
         return f"cannot be opened ({err.strerror or err})"
     if size == 0:
         return "is empty (0 bytes)"
-    if path.suffix == ".zip" or isinstance(exc, zipfile.BadZipFile):
+    if path.suffix in (".zip", ".npz") or isinstance(exc, zipfile.BadZipFile):
         if head != b"PK\x03\x04":
             return f"is not a zip archive (it starts with {head!r})"
-        if not zipfile.is_zipfile(path):
-            return f"looks truncated ({size} bytes, no zip directory at its end)"
+        if not _whole_zip(path):
+            return f"looks truncated ({size} bytes; its zip directory or members are cut short)"
     if isinstance(exc, json.JSONDecodeError):
-        tail = len(exc.doc.rstrip())
-        if exc.pos >= tail - 1:
+        text = exc.doc.rstrip()
+        if exc.msg.startswith("Unterminated") or not text.endswith(("}", "]")):
             return f"looks truncated (its JSON stops after {size} bytes: {exc.msg})"
         return f"is not valid JSON ({exc})"
     if isinstance(exc, _TRUNCATED) or "truncated" in str(exc):
@@ -67,6 +68,21 @@ def diagnose(path: str | Path, exc: BaseException | None = None) -> str:
             f"written by another version ({type(exc).__name__}: {exc})"
         )
     return f"cannot be parsed ({type(exc).__name__}: {exc})"
+
+
+def _whole_zip(path: Path) -> bool:
+    """Whether `path` is one whole zip archive, every member's CRC right.
+
+    A cut SB3 checkpoint may still show a zip directory: that of a torch archive stored inside
+    it, whose members do not start at byte 0.
+    """
+    try:
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+            starts_at_0 = bool(infos) and min(i.header_offset for i in infos) == 0
+            return starts_at_0 and zf.testzip() is None
+    except Exception:  # a damaged archive may fail in many ways; any of them means "not whole"
+        return False
 
 
 def _missing(path: Path, what: str, fix: str) -> ConfigError:
@@ -109,8 +125,12 @@ def read_json(path: str | Path, what: str, fix: str, kind: type = object) -> Any
 
 def read_csv(path: str | Path, what: str, fix: str, columns: Sequence[str]) -> list[dict[str, str]]:
     """The rows of CSV file `path`: every row has every cell, and a value in each of `columns`."""
-    with reading(path, what, fix) as p, p.open(newline="") as f:
-        rows = list(csv.DictReader(f))
+    with reading(path, what, fix) as p:
+        text = p.read_text()
+        rows = list(csv.DictReader(io.StringIO(text, newline="")))
+    if not text.endswith("\n"):  # every writer ends its header and rows with a newline
+        problem = "looks truncated: its last row is cut short" if text else "is empty (0 bytes)"
+        raise FileFormatError(f"The {what} {path} {problem}. {fix}", path=str(path))
     missing = [c for c in columns if not rows or c not in rows[0]]
     if missing and rows:
         raise FileFormatError(
