@@ -20,6 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import advgame
+from advgame.cli import main
 from advgame.errors import AdvgameError, ConfigError, UnknownNameError
 
 SCENARIO = "InvertedPendulum-v5"  # the cheapest MuJoCo task: 4 observations, 1 action
@@ -256,3 +257,97 @@ def test_a_typo_in_a_make_keyword_is_named_with_the_nearest_one() -> None:
         advgame.make(SCENARIO, max_episode_step=10)
     with pytest.raises(ConfigError, match=r"Schedule\.every must be an integer"):
         advgame.make(SCENARIO, disruptors={"action": {"schedule": {"every": "often"}}})
+
+
+# -- the command line ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """Paths the CLI fuzzer names: missing, empty folders, a non-zip 'model', garbage JSON."""
+    root = tmp_path_factory.mktemp("cli-fuzz")
+    (root / "empty").mkdir()
+    (root / "fake.zip").write_text("not a model\n")
+    (root / "bad.json").write_text('{"iterations": ')
+    (root / "run").mkdir()
+    (root / "run" / "config.json").write_text('{"scenario": 3}\n')
+    names = ["missing", "empty", "fake.zip", "bad.json", "run"]
+    return {n: str(root / n) for n in names} | {"out": str(root / "out")}
+
+
+word = st.sampled_from(["", "x", "-1", "0", "nan", "inf", "1e9", "Hopper-v5", "Hoper-v5", "=", ":"])
+
+
+def cli_args(paths: dict[str, str]) -> st.SearchStrategy[list[str]]:
+    """Argument lists of the fail-fast subcommands, each with at least one bad input."""
+    path = st.sampled_from(sorted(paths.values()))
+    bad_train = st.sampled_from([
+        ["--iterations", "0"], ["--scenario", "Hoper-v5"], ["--set", "bogus=1"],
+        ["--set", "protagonist_hparams=[1]"], ["--set", "iterations"], ["--preset", "nope"],
+        ["--config", paths["bad.json"]], ["--config", paths["missing"]], ["--seed", "x"],
+        ["--set", 'protagonist_hparams={"n_stepz": 8}'], ["--train-budget-scale", "nan"],
+        ["--set", "learned=3"], ["--n-envs", "-2"], ["--method", "nope"],
+    ])  # fmt: skip
+    train = st.tuples(
+        st.lists(bad_train, min_size=1, max_size=3),
+        st.lists(st.tuples(st.sampled_from(["--protagonist-steps", "--seed", "--preset"]), word)),
+    ).map(lambda t: ["train", "--run-dir", paths["out"], "--no-progress"]
+          + [a for pair in [*t[0], *t[1]] for a in pair])  # fmt: skip
+    spec = st.one_of(
+        st.builds(lambda n, p, a: f"{n}={p}:{a}", word, path, st.sampled_from(["ppo", "x", ""])),
+        word,
+    )
+    column = st.sampled_from(["preset:nope", "population:" + paths["missing"], "attack:foo",
+                              "learned:" + paths["empty"], "bogus", "population:x,last=-1"])  # fmt: skip
+    option = st.one_of(
+        st.tuples(st.sampled_from(["--checkpoint", "--normalizer", "--team", "--callable"]), spec),
+        st.tuples(
+            st.sampled_from(
+                [
+                    "--seeds",
+                    "--episodes",
+                    "--workers",
+                    "--last",
+                    "--threat",
+                    "--exploitability",
+                    "--scenario",
+                    "--raw-obs",
+                ]
+            ),
+            word,
+        ),
+        st.tuples(st.just("--adversaries"), column),
+    )
+    evaluate = st.tuples(st.lists(path, max_size=2), st.lists(option, max_size=4)).map(
+        lambda t: ["evaluate", *t[0], "--out", paths["out"], *[a for o in t[1] for a in o]]
+    )
+    report = st.tuples(st.just("report"), path).map(list)
+    resume = st.tuples(st.just("resume"), path, st.just("--no-progress")).map(list)
+    listing = st.one_of(
+        st.lists(word, max_size=2).map(lambda ids: ["list", *ids]),
+        word.map(lambda f: ["list", "--family", f]),
+    )
+    psro = st.one_of(
+        st.tuples(path).map(lambda p: ["psro", "--run-dir", p[0], "--resume"]),
+        st.sampled_from([["--iterations", "-1"], ["--solver", "x"], ["--set", "x=1"],
+                         ["--scenario", "Hoper-v5"], ["--eval-seeds", "0"]]).map(
+            lambda bad: ["psro", "--run-dir", paths["out"], *bad]),
+    )  # fmt: skip
+    return st.one_of(train, evaluate, report, resume, listing, psro)
+
+
+@given(data=st.data())
+@settings(max_examples=120, deadline=None, suppress_health_check=list(HealthCheck))
+def test_the_cli_exits_with_a_message_never_a_traceback(
+    data: st.DataObject, files: dict[str, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = data.draw(cli_args(files), label="argv")
+    capsys.readouterr()  # what earlier examples printed
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse's usage errors (and --help)
+        assert exc.code in (0, 2), argv
+        return
+    err = capsys.readouterr().err.strip()
+    assert "Traceback" not in err
+    if status != 0:
+        assert status == 2 and err.startswith(f"advgame {argv[0]}: error: "), (argv, status, err)
+        assert len(err.splitlines()) == 1, err

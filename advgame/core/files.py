@@ -48,7 +48,8 @@ def diagnose(path: str | Path, exc: BaseException | None = None) -> str:
         return f"cannot be opened ({err.strerror or err})"
     if size == 0:
         return "is empty (0 bytes)"
-    if path.suffix in (".zip", ".npz") or isinstance(exc, zipfile.BadZipFile):
+    zipped = isinstance(exc, zipfile.BadZipFile) or "zip" in str(exc).lower()
+    if path.suffix in (".zip", ".npz") or zipped:
         if head != b"PK\x03\x04":
             return f"is not a zip archive (it starts with {head!r})"
         if not _whole_zip(path):
