@@ -25,7 +25,7 @@ from advgame.errors import AdvgameError, ConfigError, UnknownNameError
 
 SCENARIO = "InvertedPendulum-v5"  # the cheapest MuJoCo task: 4 observations, 1 action
 FUZZ = settings(
-    max_examples=60,
+    max_examples=150,
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )

@@ -13,7 +13,7 @@ Example:
     >>> try:
     ...     read_json(bad, "run state", fix="rerun `advgame train`")
     ... except FileFormatError as exc:
-    ...     print(str(exc).split(":")[0].endswith("state.json"), "truncated" in str(exc))
+    ...     print(str(bad) in str(exc), "truncated" in str(exc))
     True True
 
 """
