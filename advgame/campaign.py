@@ -153,7 +153,7 @@ def _progress(run_dir: Path) -> int:
     """The last finished iteration of a run (0: none)."""
     if not (run_dir / "state.json").exists():
         return 0
-    return int(read_json(run_dir / "state.json", "The run state", ("iteration",))["iteration"])
+    return int(read_json(run_dir / "state.json", "run state", ("iteration",))["iteration"])
 
 
 def _train_unit(unit: tuple[Any, str]) -> str:
@@ -364,7 +364,7 @@ def release_campaign(
     with table.open(newline="") as f:
         rows = list(csv.DictReader(f))
     optimal_path = out / "results" / "optimal.json"
-    optimal = read_json(optimal_path, "The optimal-attack search") if optimal_path.exists() else {}
+    optimal = read_json(optimal_path, "optimal-attack search") if optimal_path.exists() else {}
     env = campaign.scenario.split("-v")[0].lower()
     released = []
     for row in rows:
@@ -379,7 +379,7 @@ def release_campaign(
             steps=cfg.protagonist_steps * cfg.iterations + cfg.warmup_steps, seed=cfg.seed,
             natural_return=float(row["natural"]), worst_attack_return=float(row["worst"]),
             worst_attack=row["worst_attack"], threat=campaign.threat or "default",
-            algo=spec.algo, config=read_json(run / "config.json", "The run config"),
+            algo=spec.algo, config=read_json(run / "config.json", "run config"),
         )  # fmt: skip
         released.append(release(entry, sources, root))
     return released
@@ -396,7 +396,7 @@ def _strongest_adversary(run: Path, searched: Mapping[str, Any]) -> dict[str, Pa
         if searched.get("kept_normalizer"):
             found["adversary_normalizer"] = Path(searched["kept_normalizer"])
         return found
-    state = read_json(run / "state.json", "The run state", ("checkpoint",))
+    state = read_json(run / "state.json", "run state", ("checkpoint",))
     folder = run / state["checkpoint"]
     model = folder / "observation_adversary.zip"
     if not model.exists():

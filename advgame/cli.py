@@ -437,7 +437,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``advgame`` command; returns the exit status."""
+    """Entry point of the ``advgame`` command; returns the exit status.
+
+    An `AdvgameError` (a bad value or a damaged file) or an `OSError` (a path the system
+    refuses) is printed as one line on stderr, with exit status 2; argparse's usage errors
+    exit 2 too.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(
@@ -452,6 +457,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # e.g. `advgame list | head`
         sys.stderr.close()
         return 0
+    except OSError as exc:  # a path the system refuses (a file where a folder goes, no rights)
+        print(
+            f"advgame {args.command}: error: {exc}; check that path and its permissions.",
+            file=sys.stderr,
+        )
+        return 2
     except KeyboardInterrupt:
         print(
             f"advgame {args.command}: interrupted; a training run can be continued with "

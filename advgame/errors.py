@@ -26,12 +26,18 @@ class ConfigError(AdvgameError, ValueError):
     """A configuration value (disruptor, schedule, preset, learner) is invalid."""
 
 
-class FileFormatError(ConfigError):
-    """A file advgame wrote (run state, checkpoint, population, results) cannot be read back.
+class FileFormatError(AdvgameError, ValueError):
+    """A file advgame wrote (run, checkpoint, normalizer, population, results) cannot be read.
 
-    The message names the file and says whether it looks truncated (an interrupted write or
-    copy) or written by another version, and what to do.
+    The message names the file, says whether it looks empty, truncated, not of its format or
+    written by another version, and how to recover (rerun the step that wrote it, or delete
+    the folder). Bad *values* a user typed are `ConfigError`s.
     """
+
+    def __init__(self, message: str, path: str | None = None) -> None:
+        super().__init__(message)
+        self.path = path
+        """The file that failed to load."""
 
 
 class BudgetError(ConfigError):

@@ -32,6 +32,8 @@ from typing import Any, Literal
 import numpy as np
 
 from advgame.core.config import load_json, save_json, write_atomic
+from advgame.core.fields import check_fields
+from advgame.core.files import read_json, require
 from advgame.errors import ConfigError
 from advgame.evaluation.metasolver import game_value, solve
 from advgame.evaluation.report import write_meta_report
@@ -82,6 +84,7 @@ class PSROConfig:
     """Seeds every best response (plus its iteration) and the mixtures' draws."""
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name in ("iterations", "protagonist_steps", "adversary_steps", "eval_seeds",
                      "eval_episodes"):  # fmt: skip
             value = getattr(self, name)
@@ -164,7 +167,13 @@ def resume_psro(
 def load_meta(run_dir: str | Path) -> list[dict[str, Any]]:
     """The meta-game of every finished iteration (``meta.json``): matrix, strategies, value."""
     path = Path(run_dir) / "meta.json"
-    return json.loads(path.read_text()) if path.exists() else []
+    if not path.exists():
+        return []
+    fix = f"Delete {path} and `advgame psro --run-dir {run_dir} --resume` rebuilds it."
+    meta: list[dict[str, Any]] = read_json(path, "PSRO meta-game file", fix, kind=list)
+    for entry in meta:
+        require(entry, ("iteration", "solver", "value"), path, "PSRO meta-game file", fix)
+    return meta
 
 
 def _adversary(config: PSROConfig) -> str:

@@ -79,7 +79,7 @@ def entries(root: str | Path | None = None) -> list[ZooEntry]:
     root = Path(root) if root is not None else default_root()
     if not (root / MANIFEST).exists():
         return []
-    data = read_json(root / MANIFEST, "The zoo manifest", ("entries",))
+    data = read_json(root / MANIFEST, "zoo manifest", ("entries",))
     try:
         return [ZooEntry(**e) for e in data["entries"]]
     except TypeError as exc:

@@ -16,7 +16,7 @@ import json
 import os
 import textwrap
 import typing
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -66,8 +66,24 @@ def to_dict(cfg: Any) -> dict[str, Any]:
 
 
 def from_dict(cls: type[T], data: dict[str, Any]) -> T:
-    """Build config `cls` from a dict, naming unknown keys with a suggestion."""
-    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    """Build config `cls` from a dict, naming unknown keys with a suggestion.
+
+    Raises:
+        ConfigError: `data` is not a mapping, names an unknown option or lacks a required one.
+
+    """
+    fields = dataclasses.fields(cls)  # type: ignore[arg-type]
+    names = {f.name for f in fields}
+    if not isinstance(data, Mapping):
+        raise ConfigError(
+            f"{cls.__name__} options must be a mapping {{option: value}}, got {data!r}. "
+            f"Options: {sorted(names)}."
+        )
+    required = [f.name for f in fields if f.init and _required(f) and f.name not in data]
+    if required:
+        raise ConfigError(
+            f"{cls.__name__} needs the option(s) {required}, got only {sorted(data)}."
+        )
     for key in data:
         if key not in names:
             raise ConfigError(
@@ -77,6 +93,10 @@ def from_dict(cls: type[T], data: dict[str, Any]) -> T:
     hints = typing.get_type_hints(cls)
     values = {k: _coerce(hints[k], v) for k, v in data.items()}
     return cls(**values)
+
+
+def _required(f: dataclasses.Field[Any]) -> bool:
+    return f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
 
 
 def _coerce(hint: Any, value: Any) -> Any:
@@ -106,47 +126,21 @@ def write_atomic(path: str | Path, data: str | bytes) -> None:
 
 
 def read_json(path: str | Path, what: str, keys: Iterable[str] = ()) -> Any:
-    """Read a JSON file advgame wrote; a damaged one is a `FileFormatError` that says how.
+    """Read a JSON file advgame wrote, with the keys its top level must have.
 
-    Args:
-        path: the file.
-        what: what it is, for the message (``"the run state"``).
-        keys: keys the top-level object must have (else: another version, or edited).
-
+    A missing file is a `ConfigError`; an empty, truncated or garbled one, or one without
+    `keys` (another version, or edited), a `FileFormatError` saying which
+    (`advgame.core.files.read_json`).
     """
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise FileFormatError(f"{what} {path} is missing.") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"{what} {path} cannot be read ({exc}).") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(
-            f"{what} {path} is not valid JSON ({exc}): {_damage(text, exc)}"
-        ) from None
-    missing = [k for k in keys if not isinstance(data, dict) or k not in data]
-    if missing:
-        raise FileFormatError(
-            f"{what} {path} lacks {missing}: it was written by another version of advgame or "
-            "edited by hand. Restore it, or start that step again in a new folder."
-        )
+    from advgame.core.files import read_json as _read
+    from advgame.core.files import require
+
+    fix = f"restore {Path(path).name} or rerun the step that wrote it"
+    keys = list(keys)
+    data = _read(path, what, fix, kind=dict if keys else object)
+    if keys:
+        require(data, keys, path, what, fix)
     return data
-
-
-def _damage(text: str, exc: json.JSONDecodeError) -> str:
-    """Why a JSON text failed: cut short, empty, or garbled."""
-    if not text.strip():
-        return "it is empty, probably from an interrupted write; delete it and rerun the step."
-    unclosed = text.count("{") + text.count("[") - text.count("}") - text.count("]")
-    if exc.pos >= len(text.rstrip()) or unclosed > 0 or exc.msg.startswith("Unterminated"):
-        return (
-            "it ends mid-document, so it looks truncated (an interrupted write or copy); "
-            "restore it or rerun the step that wrote it."
-        )
-    return "it is garbled or not a file advgame wrote; restore it or rerun the step."
 
 
 def save_json(cfg: Any, path: str | Path) -> None:
@@ -155,11 +149,20 @@ def save_json(cfg: Any, path: str | Path) -> None:
 
 
 def load_json(cls: type[T], path: str | Path) -> T:
-    """Read a config from JSON written by `save_json` (or by hand)."""
-    data = read_json(path, "The config")
-    if not isinstance(data, dict):
-        raise FileFormatError(f"The config {path} holds {type(data).__name__}, not an object.")
-    return from_dict(cls, data)
+    """Read a config from JSON written by `save_json` (or by hand).
+
+    Raises:
+        ConfigError: no file at `path`, or a value in it is invalid.
+        FileFormatError: the file is empty, truncated or not a JSON object.
+
+    """
+    from advgame.core.files import read_json
+
+    fix = (
+        f"Fix or delete {path}; `advgame train --help` lists every {cls.__name__} field, and "
+        "a run writes its config.json when it starts."
+    )
+    return from_dict(cls, read_json(path, f"{cls.__name__} file", fix, kind=dict))
 
 
 def override(cfg: T, assignments: list[str]) -> T:

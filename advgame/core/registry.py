@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import inspect
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -96,8 +98,87 @@ class ScenarioSpec:
         return load(self.presets)(self.id)
 
     def make_task(self, **kwargs: Any) -> Any:
-        """Build the task base (the caller's kwargs override the registered ones)."""
-        return load(self.task)(**{**self.task_kwargs, **kwargs})
+        """Build the task base (the caller's kwargs override the registered ones).
+
+        Raises:
+            ConfigError: the task base refused a keyword argument (unknown or a bad value);
+                the message names it and, for Gymnasium tasks, the keywords it accepts.
+
+        """
+        _check_max_steps(kwargs.get("max_episode_steps"))
+        try:
+            return load(self.task)(**{**self.task_kwargs, **kwargs})
+        except AdvgameError:
+            raise
+        except Exception as exc:  # the simulator's own check of a keyword, in its own words
+            if not kwargs:
+                raise
+            raise _task_error(self, kwargs, exc) from exc
+
+    def task_keywords(self) -> list[str]:
+        """The keyword arguments `make` may pass to this task base, where they can be known.
+
+        For Gymnasium tasks: `gymnasium.make`'s own and the environment class's; else the
+        parameters of the task callable (empty when it only takes ``**kwargs``).
+        """
+        names = _parameters(load(self.task))
+        env_id = self.task_kwargs.get("env_id")
+        if isinstance(env_id, str):
+            names |= _gym_keywords(env_id)
+        return sorted(names - set(self.task_kwargs) - {"id", "self"})
+
+
+def _check_max_steps(steps: Any) -> None:
+    if steps is None or (isinstance(steps, int) and not isinstance(steps, bool) and steps >= 1):
+        return
+    raise ConfigError(
+        f"max_episode_steps must be an integer >= 1 (or None for the task's own limit), got "
+        f"{steps!r}; e.g. make(..., max_episode_steps=1000)."
+    )
+
+
+def _parameters(fn: Any) -> set[str]:
+    """Named keyword parameters of `fn` (a class: of its ``__init__`` and its bases')."""
+    out: set[str] = set()
+    for target in fn.__mro__ if isinstance(fn, type) else (fn,):
+        init = vars(target).get("__init__", object.__init__) if isinstance(fn, type) else target
+        try:
+            params = inspect.signature(init).parameters.values()
+        except (TypeError, ValueError):
+            continue
+        out |= {p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
+        if isinstance(fn, type) and not any(p.kind == p.VAR_KEYWORD for p in params):
+            break
+    return out
+
+
+def _gym_keywords(env_id: str) -> set[str]:
+    import gymnasium
+
+    from advgame.core.task import GymTask
+
+    try:
+        entry = gymnasium.spec(env_id).entry_point
+        env = load(entry) if isinstance(entry, str) else entry
+    except Exception:  # only for the message: an env gymnasium cannot find names no keywords
+        return set()
+    return _parameters(gymnasium.make) | _parameters(GymTask) | _parameters(env)
+
+
+def _task_error(spec: ScenarioSpec, kwargs: Mapping[str, Any], exc: Exception) -> ConfigError:
+    known = spec.task_keywords()
+    match = re.search(r"unexpected keyword argument '(\w+)'", str(exc))
+    if match:
+        bad = match.group(1)
+        return UnknownNameError(
+            f"make({spec.id!r}) got the unknown keyword argument {bad!r}."
+            f"{did_you_mean(bad, known)} Keywords of this task: {known or 'see its docs'}."
+        )
+    return ConfigError(
+        f"make({spec.id!r}) could not build the task with {dict(kwargs)!r}: "
+        f"{type(exc).__name__}: {exc}. Fix or drop those keyword arguments."
+        + (f" Keywords of this task: {known}." if known else "")
+    )
 
 
 def load(entry_point: str) -> Any:
@@ -129,6 +210,11 @@ def list_scenarios(family: str | None = None) -> list[str]:
 def scenario_spec(scenario_id: str) -> ScenarioSpec:
     """The `ScenarioSpec` of `scenario_id`, with a "did you mean" for typos."""
     _ensure_builtin()
+    if not isinstance(scenario_id, str):
+        raise UnknownScenarioError(
+            f"A scenario id is a string such as 'Hopper-v5', got {scenario_id!r}. "
+            "advgame.list_scenarios() (or `advgame list`) shows every id."
+        )
     try:
         return _REGISTRY[scenario_id]
     except KeyError:
@@ -167,9 +253,9 @@ def make(
     """
     from advgame.core.game import Game
 
+    _check_options(preset, phase, cost_weight)
     spec = scenario_spec(scenario_id)
     spec.check_installed()
-    _check_make_options(preset, phase, cost_weight, task_kwargs)
     chosen = None
     if disruptors is not None and preset is not None:
         raise ConfigError("Give either preset=... or disruptors=..., not both.")
@@ -186,7 +272,7 @@ def make(
     else:
         specs = _as_specs(disruptors)
     weight = cost_weight if cost_weight is not None else (chosen.cost_weight if chosen else 0.0)
-    task = _make_task(spec, task_kwargs)
+    task = spec.make_task(**task_kwargs)
     try:
         game = Game(task, specs, cost_weight=weight, phase=phase, scenario_id=scenario_id)
     except AdvgameError:
@@ -203,43 +289,23 @@ def make(
     return game
 
 
-def _check_make_options(
-    preset: Any, phase: Any, cost_weight: Any, task_kwargs: Mapping[str, Any]
-) -> None:
-    """`make`'s own options, and the task options every task base shares, checked up front."""
+def _check_options(preset: Any, phase: Any, cost_weight: Any) -> None:
+    """Types and values of `make`'s own keywords, before anything is built."""
     if preset is not None and not isinstance(preset, str):
-        raise ConfigError(f"preset must be a preset name (str), got {preset!r}.")
+        raise ConfigError(f"preset must be a preset name (a string), got {preset!r}.")
     if phase not in ("train", "eval"):
         raise ConfigError(f"phase must be 'train' or 'eval', got {phase!r}.")
-    if cost_weight is not None and (
+    if cost_weight is None:
+        return
+    if (
         isinstance(cost_weight, bool)
         or not isinstance(cost_weight, (int, float))
-        or not math.isfinite(cost_weight)
-        or cost_weight < 0
+        or not 0 <= cost_weight < math.inf
     ):
-        raise ConfigError(f"cost_weight must be a finite number >= 0, got {cost_weight!r}.")
-    steps = task_kwargs.get("max_episode_steps")
-    if steps is not None and (type(steps) is not int or steps < 1):
         raise ConfigError(
-            f"max_episode_steps must be an int >= 1 (or None for the task's own limit), "
-            f"got {steps!r}."
+            f"cost_weight must be a finite number >= 0 (the weight of the cost in the payoff), "
+            f"got {cost_weight!r}."
         )
-
-
-def _make_task(spec: ScenarioSpec, task_kwargs: Mapping[str, Any]) -> Any:
-    """The task base, its constructor's errors for the user's task options made clear."""
-    try:
-        return spec.make_task(**task_kwargs)
-    except AdvgameError:
-        raise
-    except (TypeError, ValueError) as exc:
-        if not task_kwargs:
-            raise
-        raise ConfigError(
-            f"Scenario {spec.id!r} rejected the task options {dict(task_kwargs)!r} "
-            f"({type(exc).__name__}: {exc}). Task options are passed to its task base: "
-            "e.g. max_episode_steps, render_mode, and the scenario's own (see its docs)."
-        ) from exc
 
 
 def _as_specs(disruptors: Sequence[DisruptorSpec] | Mapping[str, Any]) -> tuple[DisruptorSpec, ...]:
@@ -248,6 +314,11 @@ def _as_specs(disruptors: Sequence[DisruptorSpec] | Mapping[str, Any]) -> tuple[
     if isinstance(disruptors, Mapping):
         out = []
         for kind, cfg in disruptors.items():
+            if isinstance(cfg, (list, tuple)) and not cfg:
+                raise ConfigError(
+                    f"disruptors[{kind!r}] is an empty list; give a dict of options, a list of "
+                    "dicts for several, or leave the kind out."
+                )
             for one in cfg if isinstance(cfg, (list, tuple)) else [cfg]:
                 out.append(from_config(kind, one))
         return tuple(out)
@@ -255,10 +326,10 @@ def _as_specs(disruptors: Sequence[DisruptorSpec] | Mapping[str, Any]) -> tuple[
         raise ConfigError(
             f"disruptors must be a list of DisruptorSpec or a dict {{kind: options}}, got {disruptors!r}."
         )
-    bad = [d for d in disruptors if not isinstance(d, DisruptorSpec)]
-    if bad:
-        raise ConfigError(
-            f"disruptors must be DisruptorSpec objects (e.g. ObservationDisruptor(eps=0.1)) or "
-            f"a dict {{kind: options}}; got {bad[0]!r} in the list."
-        )
+    for d in disruptors:
+        if not isinstance(d, DisruptorSpec):
+            raise ConfigError(
+                f"disruptors must hold DisruptorSpec objects (e.g. ObservationDisruptor(eps=0.1)), "
+                f"got {d!r}; or pass a dict {{kind: options}}."
+            )
     return tuple(disruptors)

@@ -11,6 +11,7 @@ from typing import Literal
 
 import numpy as np
 
+from advgame.core.fields import check_fields
 from advgame.errors import ConfigError
 
 __all__ = ["PHASES", "Phase", "Schedule"]
@@ -55,7 +56,8 @@ class Schedule:
     """Environment disruptors only: keep a shift across resets instead of restoring nominal values."""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.every, int) or self.every < 1:
+        check_fields(self)
+        if self.every < 1:
             raise ConfigError(f"Schedule.every must be an int >= 1, got {self.every!r}.")
         if not (0.0 <= float(self.probability) <= 1.0):
             raise ConfigError(f"Schedule.probability must be in [0, 1], got {self.probability!r}.")

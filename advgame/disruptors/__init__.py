@@ -6,10 +6,10 @@ class; a new disruptor is one file plus one line here.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
+from advgame.core.config import from_dict
 from advgame.core.schedule import Schedule
 from advgame.disruptors.action import ActionDisruptor
 from advgame.disruptors.arm import ArmDisruptor
@@ -19,7 +19,7 @@ from advgame.disruptors.force import ForceDisruptor
 from advgame.disruptors.observation import ObservationDisruptor
 from advgame.disruptors.reward import RewardDisruptor
 from advgame.disruptors.workspace import Shift, WorkspaceDisruptor
-from advgame.errors import AdvgameError, ConfigError, UnknownNameError, did_you_mean
+from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 
 __all__ = [
     "KINDS",
@@ -69,47 +69,25 @@ def from_config(kind: str, config: Mapping[str, Any] | DisruptorSpec) -> Disrupt
         )
     if not isinstance(config, Mapping):
         raise ConfigError(
-            f"The options of a {kind!r} disruptor must be a dict of its fields (e.g. "
-            f"{{'eps': 0.1}}; {{}} for its defaults), got {config!r}."
+            f"The options of a {kind!r} disruptor must be a dict (e.g. {{}} for the defaults, "
+            f'{{"schedule": {{"every": 10}}}}), or a list of dicts for several, got {config!r}.'
         )
-    try:
-        return _build(kind, dict(config))
-    except AdvgameError as exc:
-        raise type(exc)(f"In the {kind!r} disruptor {dict(config)!r}: {exc}") from None
-    except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
-        raise ConfigError(
-            f"Bad options for a {kind!r} disruptor {dict(config)!r}: {exc}. Its fields are "
-            f"those of {KINDS['reward' if kind == 'cost' else kind].__name__} "
-            "(see its docstring)."
-        ) from exc
-
-
-def _build(kind: str, cfg: dict[str, Any]) -> DisruptorSpec:
-    """`from_config`'s construction, nested dicts (schedule, params, shifts) included."""
+    cfg = dict(config)
     if kind == "cost":
         kind, cfg = "reward", {**cfg, "signal": "cost"}
     if isinstance(cfg.get("schedule"), Mapping):
-        cfg["schedule"] = _item(Schedule, cfg["schedule"], "schedule")
-    if kind == "dynamics" and "params" in cfg:
-        cfg["params"] = tuple(_item(Param, p, "params") for p in cfg["params"])
-    if kind == "workspace" and "shifts" in cfg:
-        cfg["shifts"] = tuple(_item(Shift, s, "shifts") for s in cfg["shifts"])
-    return KINDS[kind](**cfg)
+        cfg["schedule"] = from_dict(Schedule, cfg["schedule"])
+    if kind == "dynamics" and _is_list(cfg.get("params")):
+        cfg["params"] = tuple(_nested(Param, p) for p in cfg["params"])
+    if kind == "workspace" and _is_list(cfg.get("shifts")):
+        cfg["shifts"] = tuple(_nested(Shift, s) for s in cfg["shifts"])
+    return from_dict(KINDS[kind], cfg)
 
 
-def _item(cls: type, value: Any, field: str) -> Any:
-    """One entry of a list field: an instance of `cls` or a dict of its fields."""
-    if isinstance(value, cls):
-        return value
-    if not isinstance(value, Mapping):
-        raise ConfigError(
-            f"Each of {field} must be a {cls.__name__} or a dict of its fields, got {value!r}."
-        )
-    names = [f.name for f in dataclasses.fields(cls)] if dataclasses.is_dataclass(cls) else []
-    unknown = [k for k in value if names and k not in names]
-    if unknown:
-        raise UnknownNameError(
-            f"{field} has no field {unknown[0]!r}.{did_you_mean(str(unknown[0]), names)} "
-            f"{cls.__name__} fields: {names}."
-        )
-    return cls(**value)
+def _is_list(value: Any) -> bool:
+    return isinstance(value, (list, tuple))
+
+
+def _nested(cls: type[Any], value: Any) -> Any:
+    """A `Param` or `Shift` given as itself or as a dict of its fields."""
+    return value if isinstance(value, cls) else from_dict(cls, value)

@@ -22,6 +22,7 @@ from advgame.disruptors.base import (
     Disruptor,
     DisruptorSpec,
     as_budget,
+    budget_array,
     resolve_targets,
 )
 from advgame.errors import BudgetError, ConfigError
@@ -47,6 +48,7 @@ class ActionDisruptor(DisruptorSpec):
     """
 
     kind = "action"
+    budget_fields = ("eps",)
     mode: Literal["additive", "probabilistic", "noisy"] = "additive"
     """Which action-robust form (see the module docstring)."""
     eps: float | Sequence[float] = 0.1
@@ -65,7 +67,7 @@ class ActionDisruptor(DisruptorSpec):
         if not (0.0 <= float(self.alpha) <= 1.0):
             raise BudgetError(f"ActionDisruptor.alpha must be in [0, 1], got {self.alpha!r}.")
         if self.mode == "additive" and self.bounded:
-            eps = np.asarray(self.eps, dtype=np.float64)
+            eps = budget_array(self.eps, "ActionDisruptor.eps")
             as_budget(self.eps, eps.size if eps.ndim else 1, "ActionDisruptor.eps")
         if self.mode != "additive" and not self.bounded:
             raise ConfigError("bounded=False applies only to mode='additive'.")

@@ -35,6 +35,7 @@ class ArmDisruptor(DisruptorSpec):
     """
 
     kind = "arm"
+    budget_fields = ("scale",)
     robot: int = 1
     """Index of the external robot (in the task's robot order) the adversary commands."""
     scale: float | tuple[float, ...] = 1.0

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.fields import check_fields
 from advgame.core.schedule import Schedule
 from advgame.errors import ActionError, BudgetError, UnknownNameError, did_you_mean
 
@@ -37,6 +38,7 @@ __all__ = [
     "Hook",
     "all_finite",
     "as_budget",
+    "budget_array",
     "in_unit_box",
     "resolve_targets",
 ]
@@ -64,6 +66,24 @@ def in_unit_box(u: np.ndarray) -> bool:
     return bool(np.maximum.reduce(np.abs(u), axis=None, initial=0.0) <= 1.0)  # NaN: False
 
 
+def budget_array(value: Any, what: str) -> np.ndarray:
+    """`value` (a number or a list of numbers) as a float array.
+
+    Raises:
+        BudgetError: if it is not numeric (a string, None, a dict, a bool, a ragged list).
+
+    """
+    try:
+        if isinstance(value, (bool, str, bytes, Mapping)) or value is None:
+            raise TypeError
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise BudgetError(
+            f"{what} must be a number or a list of numbers, got {value!r} "
+            f"({type(value).__name__}); e.g. 0.1 or [0.1, 0.2]."
+        ) from None
+
+
 def as_budget(value: float | Sequence[float], size: int, what: str) -> np.ndarray:
     """Validate a budget (scalar or per-dimension) and broadcast it to `size` entries.
 
@@ -71,7 +91,7 @@ def as_budget(value: float | Sequence[float], size: int, what: str) -> np.ndarra
         BudgetError: if it is negative, non-finite or of the wrong length.
 
     """
-    arr = np.asarray(value, dtype=np.float64)
+    arr = budget_array(value, what)
     if arr.ndim > 1 or (arr.ndim == 1 and arr.shape[0] != size):
         raise BudgetError(
             f"{what} must be a scalar or a sequence of {size} values, got shape {arr.shape}."
@@ -118,10 +138,11 @@ class DisruptorSpec(abc.ABC):
 
     kind: ClassVar[str] = ""
     """Registry name of the disruptor kind (``"observation"``, ``"action"``, ...)."""
+    budget_fields: ClassVar[tuple[str, ...]] = ()
+    """Budget fields, checked by `as_budget` (with their shapes) rather than by type."""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.schedule, Schedule):
-            raise BudgetError(f"schedule must be a Schedule, got {type(self.schedule).__name__}.")
+        check_fields(self, skip=self.budget_fields)
 
     @property
     def agent(self) -> str:

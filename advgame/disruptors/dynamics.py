@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from advgame.core.fields import check_fields
 from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
@@ -70,6 +71,7 @@ class Param:
                 f"Unknown dynamics parameter {self.kind!r}.{did_you_mean(self.kind, KINDS)} "
                 f"Known: {KINDS}."
             )
+        check_fields(self)
         lo, hi = float(self.low), float(self.high)
         if not (np.isfinite(lo) and np.isfinite(hi)) or lo > hi:
             raise BudgetError(

@@ -36,6 +36,7 @@ class ForceDisruptor(DisruptorSpec):
     """
 
     kind = "force"
+    budget_fields = ("max_force", "max_torque")
     bodies: Sequence[str] = ("torso",)
     """Bodies the forces act on (RARL: torso, feet, pole)."""
     axes: str = "xyz"

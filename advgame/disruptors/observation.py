@@ -10,7 +10,13 @@ import numpy as np
 from gymnasium import spaces
 
 from advgame.disruptors import dict_obs
-from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget, resolve_targets
+from advgame.disruptors.base import (
+    AdditiveDisruptor,
+    DisruptorSpec,
+    as_budget,
+    budget_array,
+    resolve_targets,
+)
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
 if TYPE_CHECKING:
@@ -47,6 +53,7 @@ class ObservationDisruptor(DisruptorSpec):
     """
 
     kind = "observation"
+    budget_fields = ("eps",)
     eps: float | Sequence[float] | Mapping[str, float | Sequence[float]] = 0.1
     """Budget per attacked dimension (raw or normalized units); for Dict observations also a
     mapping from each attacked key to its budget (a scalar or one value per component)."""
@@ -86,11 +93,14 @@ class ObservationDisruptor(DisruptorSpec):
         if isinstance(self.eps, Mapping):
             self._check_key_budgets(self.eps)
         elif self.bounded:
-            eps = np.asarray(self.eps, dtype=np.float64)
+            eps = budget_array(self.eps, "ObservationDisruptor.eps")
             as_budget(self.eps, eps.size if eps.ndim else 1, "ObservationDisruptor.eps")
 
     def _check_key_budgets(self, eps: Mapping[str, Any]) -> None:
         """A per-key budget: bounded, and naming exactly the attacked keys when both are given."""
+        for key in eps:
+            if not isinstance(key, str):
+                raise BudgetError(f"A per-key eps mapping has string keys, got {key!r}.")
         if not self.bounded or self.dims is not None or self.space != "raw":
             raise ConfigError(
                 "A per-key eps mapping needs bounded=True, raw units and no dims, got "
@@ -102,7 +112,7 @@ class ObservationDisruptor(DisruptorSpec):
                 "budget per attacked key (or leave keys out: the mapping's keys are attacked)."
             )
         for key, value in eps.items():
-            arr = np.asarray(value, dtype=np.float64)
+            arr = budget_array(value, f"ObservationDisruptor.eps[{key!r}]")
             as_budget(value, arr.size if arr.ndim else 1, f"ObservationDisruptor.eps[{key!r}]")
 
     @property

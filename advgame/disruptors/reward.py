@@ -34,6 +34,7 @@ class RewardDisruptor(DisruptorSpec):
     """
 
     kind = "reward"
+    budget_fields = ("eps",)
     eps: float = 0.1
     """Largest change of the observed reward (or cost) per step."""
     signal: Literal["reward", "cost"] = "reward"

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from advgame.core.fields import check_fields
 from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import BudgetError, ConfigError
 
@@ -56,6 +57,7 @@ class Shift:
     """Colour of `geoms` at ``u = -1``."""
 
     def __post_init__(self) -> None:
+        check_fields(self)
         moves = [tuple(self.offset), *(tuple(o) for _, o in self.body_offsets)]
         for o in moves:
             if len(o) != 3 or not np.all(np.isfinite(o)):

@@ -24,7 +24,7 @@ def train_or_resume(cfg: TrainConfig, run_dir: Path) -> None:
     from advgame.training import resume, train
 
     if (run_dir / "state.json").exists():
-        state = read_json(run_dir / "state.json", "The run state", ("iteration",))
+        state = read_json(run_dir / "state.json", "run state", ("iteration",))
         if state["iteration"] >= cfg.iterations:
             log.info("%s is complete; reusing it", run_dir)
             return

@@ -46,7 +46,8 @@ from pathlib import Path
 from typing import Any
 
 from advgame.core.config import write_atomic
-from advgame.errors import AdvgameError, ConfigError
+from advgame.core.files import reading
+from advgame.errors import AdvgameError, ConfigError, FileFormatError
 from advgame.training.population import PATH_FIELDS
 
 __all__ = [
@@ -280,8 +281,15 @@ def write_timings(records: Sequence[UnitRecord], path: str | Path) -> None:
 def _read_part(parts: Path | None, key: str) -> UnitRecord | None:
     if parts is None or not (parts / f"{key}.pkl").exists():
         return None
-    with (parts / f"{key}.pkl").open("rb") as f:
+    path = parts / f"{key}.pkl"
+    fix = f"Delete {path}: its unit is then run again."
+    with reading(path, "finished-unit part file", fix), path.open("rb") as f:
         rec: UnitRecord = pickle.load(f)
+    if not isinstance(rec, UnitRecord):
+        raise FileFormatError(
+            f"The part file {path} holds a {type(rec).__name__}, not a unit record. {fix}",
+            path=str(path),
+        )
     rec.attempts = 0
     return rec
 

@@ -17,6 +17,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from advgame.core.fields import check_fields
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 from advgame.evaluation.payoff import COLUMNS, NOMINAL
 
@@ -88,6 +89,7 @@ class EvalJob:
     def __post_init__(self) -> None:
         from advgame.core.registry import scenario_spec
 
+        check_fields(self, skip=("seeds",))  # seeds may also be a count; _seeds checks them
         scenario_spec(self.scenario)  # an unknown id fails here, with a "did you mean"
         for name in ("protagonist", "adversary"):
             value = getattr(self, name)

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.files import read_csv, read_json, reading, require
 from advgame.errors import ConfigError, FileFormatError, did_you_mean
 
 __all__ = [
@@ -37,6 +38,13 @@ COLUMNS: tuple[str, ...] = ("scenario", "protagonist", "adversary", "seed", "epi
 COLUMNS += ("true_return", "observed_return", "cost", "payoff", "length", "clipped", "terminated")
 """The columns of every row (`advgame.core.episodes.EpisodeResult`, clips summed); tags add more."""
 _INT, _STR = {"seed", "episode", "length", "clipped"}, {"scenario", "protagonist", "adversary"}
+_KEYS = ("protagonist", "adversary", "seed", "true_return")
+"""Columns a payoff file must give on every row to be read back."""
+RESULTS_FIX = (
+    "Run `advgame evaluate` again with the same --out (it rewrites the results), or delete "
+    "the folder."
+)
+"""How to recover from a damaged results file."""
 # Student t 0.975 quantiles for df = 1..30 (95 % two-sided intervals); 1.96 beyond.
 _T975: tuple[float, ...] = (
     12.706,
@@ -103,6 +111,18 @@ def ci95(values: Sequence[float] | np.ndarray) -> float:
 
 # -- jobs -----------------------------------------------------------------------------------
 # -- the payoff table -----------------------------------------------------------------------
+def _check_played(rows: Sequence[Mapping[str, Any]], path: str | Path) -> None:
+    """Every row read back has the key cells (a cell not applicable needs only its two names)."""
+    for i, row in enumerate(rows, start=2):
+        keys = _KEYS[:2] if row.get(NOT_APPLICABLE) else _KEYS
+        if any(row.get(c) in (None, "") for c in keys):
+            raise FileFormatError(
+                f"The payoff table {path} has a short or broken row {i - 1} (it lacks one of "
+                f"{list(keys)}); it looks truncated or edited. {RESULTS_FIX}",
+                path=str(path),
+            )
+
+
 def _parse(key: str, text: str) -> Any:
     if key in _STR:
         return text
@@ -309,46 +329,26 @@ class PayoffTable:
 
     @classmethod
     def from_csv(cls, path: str | Path) -> PayoffTable:
-        """Read a table written by `to_csv` (numbers parsed back; empty cells dropped)."""
-        path = Path(path)
-        try:
-            with path.open(newline="") as f:
-                raw = list(csv.DictReader(f))
-        except FileNotFoundError:
-            raise FileFormatError(f"The payoff table {path} is missing.") from None
-        except (OSError, UnicodeDecodeError, csv.Error) as exc:
-            raise FileFormatError(f"The payoff table {path} cannot be read ({exc}).") from None
-        rows = []
-        for n, r in enumerate(raw, start=2):
-            if None in r or None in r.values():  # more fields than the header, or fewer
-                raise FileFormatError(
-                    f"Line {n} of the payoff table {path} has {len(r) - (None in r)} fields where "
-                    "the header has others: the file looks truncated or edited. Evaluate again "
-                    "(`advgame evaluate ... --out FOLDER`) to rewrite it."
-                )
-            try:
-                rows.append({k: _parse(k, v) for k, v in r.items() if v != ""})
-            except ValueError as exc:
-                raise FileFormatError(
-                    f"Line {n} of the payoff table {path} does not parse ({exc}): the file looks "
-                    "truncated or edited. Evaluate again to rewrite it."
-                ) from None
-        try:
-            return cls._split(rows)
-        except (ConfigError, KeyError) as exc:
-            raise FileFormatError(
-                f"The payoff table {path} is not one advgame wrote ({exc}); evaluate again."
-            ) from None
+        """Read a table written by `to_csv` (numbers parsed back; empty cells dropped).
+
+        Raises:
+            FileFormatError: the file is empty, cut short, or lacks the key columns.
+
+        """
+        rows = read_csv(path, "payoff table", RESULTS_FIX, columns=_KEYS[:2])
+        _check_played(rows, path)
+        with reading(path, "payoff table", RESULTS_FIX):
+            return cls._split({k: _parse(k, v) for k, v in r.items() if v != ""} for r in rows)
 
     @classmethod
     def _split(cls, rows: Iterable[Mapping[str, Any]]) -> PayoffTable:
         """A table from rows as the files hold them: episode rows and not-applicable rows."""
         played, na = [], {}
         for r in rows:
-            if NOT_APPLICABLE in r:
+            if r.get(NOT_APPLICABLE):
                 na[(str(r["protagonist"]), str(r["adversary"]))] = str(r[NOT_APPLICABLE])
             else:
-                played.append(r)
+                played.append({k: v for k, v in r.items() if k != NOT_APPLICABLE})
         return cls(played, na)
 
     def to_json(self, path: str | Path) -> Path:
@@ -364,7 +364,21 @@ class PayoffTable:
 
     @classmethod
     def from_json(cls, path: str | Path) -> PayoffTable:
-        """Read a table written by `to_json`."""
-        from advgame.core.config import read_json
+        """Read a table written by `to_json`.
 
-        return cls._split(read_json(path, "The payoff table", ("rows",))["rows"])
+        Raises:
+            FileFormatError: the file is empty, truncated, or not a payoff table.
+
+        """
+        data = read_json(path, "payoff table", RESULTS_FIX, kind=dict)
+        require(data, ("rows",), path, "payoff table", RESULTS_FIX)
+        rows = data["rows"]
+        if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+            raise FileFormatError(
+                f"The payoff table {path} has rows that are not objects: written by another "
+                f"version of advgame or another program. {RESULTS_FIX}",
+                path=str(path),
+            )
+        _check_played(rows, path)
+        with reading(path, "payoff table", RESULTS_FIX):
+            return cls._split(rows)

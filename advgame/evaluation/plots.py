@@ -8,7 +8,6 @@ Plots use matplotlib's non-interactive Agg backend, imported only when a figure 
 
 from __future__ import annotations
 
-import csv
 import logging
 import math
 from collections.abc import Iterable, Mapping, Sequence
@@ -17,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.files import read_csv
 from advgame.errors import ConfigError
 from advgame.evaluation.payoff import PayoffTable, ci95
 
@@ -131,8 +131,8 @@ def _read_progress(path: str | Path) -> dict[str, np.ndarray]:
         except ValueError:
             return math.nan
 
-    with Path(path).open(newline="") as f:
-        rows = list(csv.DictReader(f))
+    fix = "It is rewritten by the run's next iteration (`advgame resume`), or delete the run."
+    rows = read_csv(path, "progress file", fix, columns=())
     keys = list(dict.fromkeys(k for r in rows for k in r))
     return {k: np.array([num(r.get(k)) for r in rows]) for k in keys}
 

@@ -17,8 +17,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from advgame.core.config import read_json
-from advgame.errors import ConfigError, did_you_mean
+from advgame.errors import AdvgameError, ConfigError, did_you_mean
 from advgame.training.checkpoint import ALGOS, SB3Checkpoint
 
 __all__ = [
@@ -42,6 +41,7 @@ def run_protagonist(run_dir: Path) -> tuple[Any, Any]:
     """
     from advgame.core.config import load_json
     from advgame.training import TEAM_ALGOS, TrainConfig
+    from advgame.training.loop import read_state
 
     state_path = run_dir / "state.json"
     if not state_path.exists():
@@ -49,7 +49,7 @@ def run_protagonist(run_dir: Path) -> tuple[Any, Any]:
             f"{run_dir} has no finished iteration (no state.json); train or resume it."
         )
     cfg = load_json(TrainConfig, run_dir / "config.json")
-    folder = run_dir / read_json(state_path, "The run state", ("checkpoint",))["checkpoint"]
+    folder = run_dir / read_state(run_dir)["checkpoint"]
     if cfg.protagonist_algo in TEAM_ALGOS:
         path = folder / f"{cfg.protagonist_algo}_actors.pt"
         return cfg, team_protagonist(cfg.scenario, path, preset=cfg.preset)
@@ -120,6 +120,19 @@ def team_protagonist(
     return {p: actor(str(path), p, deterministic=deterministic) for p in game.protagonists}
 
 
+def _first_action(policy: Any, game: Any, agent: str) -> Any:
+    """The policy's action on the first observation; its own failure is a `ConfigError`."""
+    try:
+        return policy.act(game.observe(agent))
+    except AdvgameError:
+        raise
+    except Exception as exc:
+        raise ConfigError(
+            f"it fails on an observation of shape {np.shape(game.observe(agent))} "
+            f"({type(exc).__name__}: {exc}); fix the policy or give the scenario it was made for."
+        ) from exc
+
+
 def check_protagonists(scenario: str, protagonists: Mapping[str, Any]) -> dict[str, Any]:
     """Build every protagonist once on `scenario`'s nominal game; return the built policies.
 
@@ -138,7 +151,7 @@ def check_protagonists(scenario: str, protagonists: Mapping[str, Any]) -> dict[s
             try:
                 built[name] = build_policies(game, specs)
                 for agent in game.protagonists:
-                    _check_action(game, agent, built[name][agent].act(game.observe(agent)))
+                    _check_action(game, agent, _first_action(built[name][agent], game, agent))
             except ConfigError as exc:
                 raise type(exc)(f"Protagonist {name!r} on {scenario}: {exc}") from None
     finally:

@@ -15,6 +15,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from advgame.core.files import read_json
 from advgame.evaluation import NOMINAL, PayoffTable
 from advgame.evaluation.plots import (
     plot_budget_curve,
@@ -44,14 +45,13 @@ log = logging.getLogger(__name__)
 
 def runs_cost_limit(run_dirs: Iterable[str | Path]) -> float | None:
     """The cost limit the runs' constrained learners trained with (the smallest), if any."""
-    import json
-
     limits = []
     for d in run_dirs:
         path = Path(d) / "config.json"
         if not path.exists():
             continue
-        cfg = json.loads(path.read_text())
+        fix = "Every run writes its config.json when it starts: rerun it, or delete the folder."
+        cfg = read_json(path, "run config", fix, kind=dict)
         hparams = cfg.get("protagonist_hparams") or {}
         if "cost_limit" in hparams:
             limits.append(float(hparams["cost_limit"]))
@@ -228,10 +228,10 @@ def meta_game_section(meta: Sequence[Mapping[str, Any]]) -> str:
 
 def write_meta_report(run_dir: str | Path) -> Path:
     """Write ``report.md`` of a PSRO run directory (its meta-game section); return its path."""
-    import json
+    from advgame.psro import load_meta
 
     run_dir = Path(run_dir)
-    meta = json.loads((run_dir / "meta.json").read_text())
+    meta = load_meta(run_dir)
     text = f"# Population training: {run_dir.name}\n\n" + meta_game_section(meta)
     path = run_dir / "report.md"
     path.write_text(text + "\n")

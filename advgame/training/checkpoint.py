@@ -10,19 +10,24 @@ the policy was trained behind: the project's ``*_obs_norm.npz`` (``mean`` and ``
 from __future__ import annotations
 
 import functools
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from advgame.core.files import reading
 from advgame.core.policy import AgentInfo
 from advgame.errors import ConfigError, FileFormatError
 
 __all__ = ["ALGOS", "Normalizer", "SB3Checkpoint", "SB3Policy", "load_model", "load_normalizer"]
 
 ALGOS = ("ppo", "sac", "td3")
+CHECKPOINT_FIX = (
+    "Save it again from the model (or rerun the training iteration that wrote it); a copy "
+    "cut short in transfer loads once copied whole."
+)
+"""How to recover from a damaged checkpoint or normalizer file."""
 
 
 def _algo_class(algo: str) -> Any:
@@ -47,29 +52,9 @@ def load_model(path: str, algo: str) -> Any:
         "replay_buffer_class": None,
         "replay_buffer_kwargs": {},
     }  # only where saved (SAC/TD3)
-    if not zipfile.is_zipfile(path):
-        size = Path(path).stat().st_size
-        raise FileFormatError(
-            f"The checkpoint {path} is not a zip file ({size} bytes): "
-            + ("it is empty" if size == 0 else "it looks truncated or is not an SB3 model")
-            + ". Give the .zip that SB3's model.save() wrote (restore it, or train again)."
-        )
-    try:
-        return _algo_class(algo).load(path, device="cpu", custom_objects=plain)
-    except (
-        AssertionError,
-        KeyError,
-        ValueError,
-        EOFError,
-        RuntimeError,
-        zipfile.BadZipFile,
-    ) as exc:
-        raise FileFormatError(
-            f"The checkpoint {path} cannot be loaded as an SB3 {algo.upper()} model "
-            f"({type(exc).__name__}: {exc}): it looks truncated, or was saved by another "
-            "algorithm or another Stable-Baselines3 version. Check the :ALGO suffix, restore "
-            "the file, or train again."
-        ) from None
+    cls = _algo_class(algo)
+    with reading(path, f"{algo.upper()} checkpoint", CHECKPOINT_FIX):
+        return cls.load(path, device="cpu", custom_objects=plain)
 
 
 @dataclass(frozen=True)
@@ -103,10 +88,14 @@ def load_normalizer(path: str) -> Normalizer | None:
 @functools.lru_cache(maxsize=64)
 def _read_normalizer(path: str, mtime_ns: int) -> Normalizer | None:
     if path.endswith(".npz"):
-        with np.load(path) as stats:
+        with reading(path, "observation normalizer", CHECKPOINT_FIX), np.load(path) as stats:
             if "mean" not in stats or "var" not in stats:
-                raise ConfigError(f"{path} holds {list(stats)}; expected 'mean' and 'var'.")
-            return Normalizer(stats["mean"], stats["var"])
+                raise FileFormatError(
+                    f"The observation normalizer {path} holds {list(stats)}; expected 'mean' and "
+                    f"'var' (written by another program?). {CHECKPOINT_FIX}",
+                    path=path,
+                )
+            return Normalizer(np.asarray(stats["mean"]), np.asarray(stats["var"]))
     return _vecnormalize_stats(path)
 
 
@@ -115,14 +104,12 @@ def _vecnormalize_stats(path: str) -> Normalizer | None:
 
     from stable_baselines3.common.running_mean_std import RunningMeanStd
 
-    try:
-        with open(path, "rb") as f:
-            norm = pickle.load(f)
-    except Exception as exc:
-        raise ConfigError(
-            f"Cannot read the normalizer {path} ({type(exc).__name__}: {exc}); expected a "
-            "VecNormalize pickle (`VecNormalize.save`) or an .npz with 'mean' and 'var'."
-        ) from None
+    fix = (
+        "Expected a VecNormalize pickle (`VecNormalize.save`) or an .npz with 'mean' and 'var'; "
+        + CHECKPOINT_FIX
+    )
+    with reading(path, "VecNormalize normalizer", fix), open(path, "rb") as f:
+        norm = pickle.load(f)
     rms = getattr(norm, "obs_rms", None)
     if not isinstance(rms, RunningMeanStd):
         raise ConfigError(

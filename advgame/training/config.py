@@ -15,6 +15,7 @@ import typing
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from advgame.core.fields import check_fields
 from advgame.core.registry import load
 from advgame.errors import ConfigError
 
@@ -146,6 +147,7 @@ class TrainConfig:
         return {agent: parse(spec) for agent, spec in (self.adversaries or {}).items()}
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name in ("iterations", "protagonist_steps", "n_envs", "snapshot_every"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise ConfigError(

@@ -15,9 +15,11 @@ import numpy as np
 
 from advgame.core.config import read_json, write_atomic
 from advgame.core.episodes import filler_action, rollout
+from advgame.core.files import read_csv, read_json, reading, require
 from advgame.core.policy import ConstantPolicy
 from advgame.core.registry import load, make
 from advgame.core.views import view_factory
+from advgame.errors import FileFormatError
 from advgame.training.config import PROTAGONISTS, learner_config
 from advgame.training.learning import EpisodeStats, Side
 from advgame.training.population import ZERO, Member, Population
@@ -225,13 +227,14 @@ class Run:
 
     def _restore(self) -> int:
         t = self.t
-        state = read_json(
-            self.dir / "state.json", "The run state", ("iteration", "rng", "checkpoint")
-        )
+        state = read_state(self.dir)
         t.population = Population.load(self.dir / "population.json")
         t.population.members = [m for m in t.population if m.iteration <= state["iteration"]]
-        t.rng.bit_generator.state = state["rng"]
-        self._build_sides(self.dir / state["checkpoint"])
+        with reading(self.dir / "state.json", "run state", RERUN.format(run=self.dir)):
+            t.rng.bit_generator.state = state["rng"]
+        folder = self.dir / state["checkpoint"]
+        with reading(folder, "checkpoint folder", RERUN.format(run=self.dir)):
+            self._build_sides(folder)
         log.info("resuming %s after iteration %d", self.dir, state["iteration"])
         return int(state["iteration"]) + 1
 
@@ -303,19 +306,48 @@ def _tensorboard(folder: Path) -> Any:
     return SummaryWriter(str(folder))
 
 
+RERUN = (
+    "Delete the run directory {run} and train it again, or restore its files from a backup "
+    "(`advgame resume` continues only from intact ones)."
+)
+"""How to recover from a damaged run file (``{run}``: the run directory)."""
+
+
 def write_state(run_dir: Path, state: dict[str, Any]) -> None:
     """Write ``state.json`` atomically."""
     write_atomic(run_dir / "state.json", json.dumps(state, indent=2) + "\n")
+
+
+def read_state(run_dir: Path) -> dict[str, Any]:
+    """Read ``state.json``: the last finished iteration, the rng state and its checkpoint.
+
+    Raises:
+        FileFormatError: it is empty, truncated, or lacks a field (another version).
+
+    """
+    path, fix = run_dir / "state.json", RERUN.format(run=run_dir)
+    state = read_json(path, "run state", fix, kind=dict)
+    require(state, ("iteration", "rng", "checkpoint"), path, "run state", fix)
+    types = {"iteration": int, "rng": dict, "checkpoint": str}
+    bad = [k for k, kind in types.items() if not isinstance(state[k], kind)]
+    if bad:
+        raise FileFormatError(
+            f"The run state {path} has {bad} of the wrong type: written by another version or "
+            f"edited by hand. {fix}",
+            path=str(path),
+        )
+    return state
 
 
 def append_progress(path: Path, row: dict[str, Any], keep_below: int | None = None) -> None:
     """Append a row to the progress CSV; on resume drop rows of iterations >= `keep_below`."""
     rows: list[dict[str, Any]] = []
     if path.exists():
-        with path.open() as f:
+        fix = RERUN.format(run=path.parent)
+        with reading(path, "progress file", fix):
             rows = [
                 r
-                for r in csv.DictReader(f)
+                for r in read_csv(path, "progress file", fix, columns=("iteration",))
                 if keep_below is None or int(r["iteration"]) < keep_below
             ]
     rows.append(row)

@@ -16,9 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from advgame.core.config import read_json, write_atomic
+from advgame.core.config import write_atomic
+from advgame.core.files import read_json, reading
 from advgame.core.registry import load
-from advgame.errors import ConfigError, FileFormatError
+from advgame.errors import ConfigError
 
 __all__ = [
     "PATH_FIELDS",
@@ -201,11 +202,11 @@ class Population:
     @classmethod
     def load(cls, path: str | Path) -> Population:
         """Read a population file."""
-        data = read_json(path, "The population file")
-        if not isinstance(data, list):
-            raise FileFormatError(
-                f"The population file {path} holds {type(data).__name__}, not a list of members: "
-                "it is not a population.json advgame wrote."
-            )
+        fix = (
+            f"It is rewritten by the run that owns it: resume or rerun that run, or delete "
+            f"{Path(path).parent} and train again."
+        )
+        data = read_json(path, "population file", fix, kind=list)
         base = Path(path).parent
-        return cls([Member.from_dict(d, base) for d in data])
+        with reading(path, "population file", fix):
+            return cls([Member.from_dict(d, base) for d in data])
