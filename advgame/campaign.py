@@ -46,7 +46,7 @@ import numpy as np
 from advgame.core.config import read_json, write_atomic
 from advgame.errors import ConfigError, FileFormatError
 
-__all__ = ["Campaign", "campaign_table", "load_campaign", "release_campaign", "run_campaign"]
+__all__ = ["Campaign", "campaign_table", "load_campaign", "run_campaign"]
 
 log = logging.getLogger(__name__)
 
@@ -342,66 +342,3 @@ def _table_md(campaign: Campaign, rows: list[dict[str, Any]]) -> str:
         "[results/report.md](results/report.md).",
     ]
     return "\n".join(lines) + "\n"
-
-
-def release_campaign(
-    campaign: Campaign, out: str | Path, root: str | Path | None = None
-) -> list[Any]:
-    """Copy each method's median agent (and strongest adversary) into the zoo; return entries.
-
-    The median agent is the one `campaign_table` names; its adversary is the searched optimal
-    attack kept for it (``results/optimal.json``) when the campaign searched one.
-    """
-    import csv
-
-    from advgame.evaluation import run_protagonist
-    from advgame.zoo import ZooEntry, release
-
-    out = Path(out)
-    table = out / "campaign.csv"
-    if not table.exists():
-        raise FileFormatError(f"{table} is missing; run the campaign to its table first.")
-    with table.open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    optimal_path = out / "results" / "optimal.json"
-    optimal = read_json(optimal_path, "optimal-attack search") if optimal_path.exists() else {}
-    env = campaign.scenario.split("-v")[0].lower()
-    released = []
-    for row in rows:
-        run = out / "runs" / row["median_agent"]
-        cfg, spec = run_protagonist(run)
-        sources = {"protagonist": Path(spec.path)}
-        if spec.normalizer:
-            sources["normalizer"] = Path(spec.normalizer)
-        sources.update(_strongest_adversary(run, optimal.get(row["median_agent"], {})))
-        entry = ZooEntry(
-            id=f"{env}/{row['method']}", scenario=campaign.scenario, method=row["method"],
-            steps=cfg.protagonist_steps * cfg.iterations + cfg.warmup_steps, seed=cfg.seed,
-            natural_return=float(row["natural"]), worst_attack_return=float(row["worst"]),
-            worst_attack=row["worst_attack"], threat=campaign.threat or "default",
-            algo=spec.algo, config=read_json(run / "config.json", "run config"),
-        )  # fmt: skip
-        released.append(release(entry, sources, root))
-    return released
-
-
-def _strongest_adversary(run: Path, searched: Mapping[str, Any]) -> dict[str, Path]:
-    """The files of a run's strongest adversary (none for a run without one).
-
-    That is the optimal attack kept for it, else the run's own last learned observation
-    adversary.
-    """
-    if searched.get("kept"):
-        found = {"adversary": Path(searched["kept"])}
-        if searched.get("kept_normalizer"):
-            found["adversary_normalizer"] = Path(searched["kept_normalizer"])
-        return found
-    state = read_json(run / "state.json", "run state", ("checkpoint",))
-    folder = run / state["checkpoint"]
-    model = folder / "observation_adversary.zip"
-    if not model.exists():
-        return {}
-    found = {"adversary": model}
-    if (folder / "observation_adversary_obs_norm.npz").exists():
-        found["adversary_normalizer"] = folder / "observation_adversary_obs_norm.npz"
-    return found

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from advgame.cli_campaign import campaign_parser, zoo_parser
 from advgame.errors import AdvgameError, ConfigError
 
 __all__ = ["main"]
@@ -301,82 +302,6 @@ def _evaluate_parser(sub: Any) -> None:
     p.set_defaults(func=_cmd_evaluate)
 
 
-def _campaign_parser(sub: Any) -> None:
-    p = sub.add_parser(
-        "campaign",
-        help="train a grid of methods x seeds, evaluate it in one threat model, write the table",
-        description="Run a campaign file (TOML, see advgame.campaign): trains every unfinished "
-        "run (interrupted ones resume), evaluates every finished one, writes campaign.md, and "
-        "keeps status.json up to date. Run it again to continue.",
-    )
-    p.add_argument("file", help="the campaign file (e.g. zoo/hopper.toml)")
-    p.add_argument("--out", help="its folder (default: beside the file, named after it)")
-    p.add_argument("--stage", choices=("all", "train", "evaluate"), default="all",
-                   help="only train, only evaluate finished runs, or both (default)")  # fmt: skip
-    p.add_argument("--max-runs", type=int, metavar="K", help="train at most K unfinished runs now")
-    p.add_argument("--status", action="store_true", help="print what is done and stop")
-    p.add_argument("--release", metavar="ZOO", nargs="?", const="", default=None,
-                   help="after the table, copy each method's median agent into the zoo "
-                   "(default: the repository's zoo/) with its manifest entry")  # fmt: skip
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    _executor_arguments(p, workers=2)
-    p.set_defaults(func=_cmd_campaign)
-
-
-def _cmd_campaign(args: argparse.Namespace) -> int:
-    from advgame.campaign import load_campaign, run_campaign, write_status
-
-    campaign = load_campaign(args.file)
-    out = Path(args.out) if args.out else Path(args.file).with_suffix("")
-    if args.max_runs is not None and args.max_runs < 0:
-        raise ConfigError(f"--max-runs must be >= 0, got {args.max_runs}.")
-    if args.status:
-        out.mkdir(parents=True, exist_ok=True)
-        status = write_status(campaign, out)
-        for run, s in status["runs"].items():
-            print(f"{run}: {s['state']} ({s['iteration']}/{s['of']})")
-        print(f"evaluated: {', '.join(status['evaluated']) or 'none'}; table: {status['table']}")
-        return 0
-    path = run_campaign(
-        campaign, out, workers=args.workers, executor=args.executor, address=args.address,
-        stage=args.stage, max_runs=args.max_runs, progress=not args.no_progress,
-    )  # fmt: skip
-    print(f"campaign: {path}")
-    if args.release is not None and args.stage != "train":
-        from advgame.campaign import release_campaign
-
-        for e in release_campaign(campaign, out, args.release or None):
-            print(
-                f"released {e.id}: natural {e.natural_return:.1f}, worst {e.worst_attack_return:.1f}"
-            )
-    return 0
-
-
-def _zoo_parser(sub: Any) -> None:
-    p = sub.add_parser("zoo", help="the released agents: list the manifest")
-    p.add_argument("action", choices=("list",), help="list: print every released agent")
-    p.add_argument("--root", help="the zoo folder (default: $ADVGAME_ZOO or the repository's zoo/)")
-    p.set_defaults(func=_cmd_zoo)
-
-
-def _cmd_zoo(args: argparse.Namespace) -> int:
-    from advgame import zoo
-
-    root = Path(args.root) if args.root else zoo.default_root()
-    found = zoo.entries(root)
-    if not found:
-        print(f"no released agents in {root}")
-        return 0
-    print(
-        f"{'id':<22} {'scenario':<14} {'steps':>9} {'seed':>4} {'natural':>8} {'worst':>8}  worst attack"
-    )
-    for e in found:
-        zoo.verify(e, root)
-        print(f"{e.id:<22} {e.scenario:<14} {e.steps:>9} {e.seed:>4} {e.natural_return:>8.1f} "
-              f"{e.worst_attack_return:>8.1f}  {e.worst_attack} ({e.threat})")  # fmt: skip
-    return 0
-
-
 def _psro_parser(sub: Any) -> None:
     """``advgame psro``: every `PSROConfig` field is an option."""
     from advgame.core.config import add_arguments
@@ -421,8 +346,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_resume)
 
     _evaluate_parser(sub)
-    _campaign_parser(sub)
-    _zoo_parser(sub)
+    campaign_parser(sub, _executor_arguments)
+    zoo_parser(sub)
     _psro_parser(sub)
     p = sub.add_parser("report", help="rebuild the report (Markdown + PNG) of an evaluation folder")
     p.add_argument("folder", help="a folder written by `advgame evaluate` or `advgame demo`")

@@ -19,14 +19,27 @@ import hashlib
 import json
 import os
 import shutil
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from advgame.core.config import read_json, write_atomic
 from advgame.errors import FileFormatError, UnknownNameError, did_you_mean
 
-__all__ = ["ZooEntry", "default_root", "entries", "entry", "load", "release", "verify"]
+if TYPE_CHECKING:
+    from advgame.campaign import Campaign
+
+__all__ = [
+    "ZooEntry",
+    "default_root",
+    "entries",
+    "entry",
+    "load",
+    "release",
+    "release_campaign",
+    "verify",
+]
 
 MANIFEST = "manifest.json"
 
@@ -162,3 +175,65 @@ def release(entry: ZooEntry, sources: dict[str, Path], root: str | Path | None =
     data = {"entries": sorted([*others, asdict(done)], key=lambda e: e["id"])}
     write_atomic(base / MANIFEST, json.dumps(data, indent=2) + "\n")
     return done
+
+
+def release_campaign(
+    campaign: Campaign, out: str | Path, root: str | Path | None = None
+) -> list[Any]:
+    """Copy each method's median agent (and strongest adversary) into the zoo; return entries.
+
+    The median agent is the one `campaign_table` names; its adversary is the searched optimal
+    attack kept for it (``results/optimal.json``) when the campaign searched one.
+    """
+    import csv
+
+    from advgame.evaluation import run_protagonist
+
+    out = Path(out)
+    table = out / "campaign.csv"
+    if not table.exists():
+        raise FileFormatError(f"{table} is missing; run the campaign to its table first.")
+    with table.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    optimal_path = out / "results" / "optimal.json"
+    optimal = read_json(optimal_path, "optimal-attack search") if optimal_path.exists() else {}
+    env = campaign.scenario.split("-v")[0].lower()
+    released = []
+    for row in rows:
+        run = out / "runs" / row["median_agent"]
+        cfg, spec = run_protagonist(run)
+        sources = {"protagonist": Path(spec.path)}
+        if spec.normalizer:
+            sources["normalizer"] = Path(spec.normalizer)
+        sources.update(_strongest_adversary(run, optimal.get(row["median_agent"], {})))
+        entry = ZooEntry(
+            id=f"{env}/{row['method']}", scenario=campaign.scenario, method=row["method"],
+            steps=cfg.protagonist_steps * cfg.iterations + cfg.warmup_steps, seed=cfg.seed,
+            natural_return=float(row["natural"]), worst_attack_return=float(row["worst"]),
+            worst_attack=row["worst_attack"], threat=campaign.threat or "default",
+            algo=spec.algo, config=read_json(run / "config.json", "run config"),
+        )  # fmt: skip
+        released.append(release(entry, sources, root))
+    return released
+
+
+def _strongest_adversary(run: Path, searched: Mapping[str, Any]) -> dict[str, Path]:
+    """The files of a run's strongest adversary (none for a run without one).
+
+    That is the optimal attack kept for it, else the run's own last learned observation
+    adversary.
+    """
+    if searched.get("kept"):
+        found = {"adversary": Path(searched["kept"])}
+        if searched.get("kept_normalizer"):
+            found["adversary_normalizer"] = Path(searched["kept_normalizer"])
+        return found
+    state = read_json(run / "state.json", "run state", ("checkpoint",))
+    folder = run / state["checkpoint"]
+    model = folder / "observation_adversary.zip"
+    if not model.exists():
+        return {}
+    found = {"adversary": model}
+    if (folder / "observation_adversary_obs_norm.npz").exists():
+        found["adversary_normalizer"] = folder / "observation_adversary_obs_norm.npz"
+    return found

@@ -20,7 +20,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
-from advgame.errors import ConfigError, FileFormatError, did_you_mean
+from advgame.errors import ConfigError, did_you_mean
 
 __all__ = [
     "add_arguments",

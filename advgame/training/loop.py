@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.core.config import read_json, write_atomic
+from advgame.core.config import write_atomic
 from advgame.core.episodes import filler_action, rollout
 from advgame.core.files import read_csv, read_json, reading, require
 from advgame.core.policy import ConstantPolicy
