@@ -24,17 +24,17 @@ from pathlib import Path
 from typing import Any
 
 from advgame.errors import AdvgameError
-from advgame.evaluation.executor import (
+from advgame.evaluation.units import (
     Options,
     UnitRecord,
     execute,
     finish,
+    init_worker,
     pickled,
     retry,
     ship,
     timed,
 )
-from advgame.evaluation.executor import _init_worker as init_worker
 
 __all__ = ["run_local", "shutdown"]
 

@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from advgame.errors import AdvgameError, MissingExtraError
-from advgame.evaluation.executor import Options, UnitRecord, execute, finish, pickled, retry, ship
+from advgame.evaluation.units import Options, UnitRecord, execute, finish, pickled, retry, ship
 
 __all__ = ["connect", "run_ray"]
 
