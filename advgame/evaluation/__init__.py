@@ -36,6 +36,7 @@ from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from advgame.core.policy import WhiteBox, WhiteBoxForwarder
 from advgame.errors import ConfigError
 from advgame.evaluation.batched import LOCKSTEP_EPISODES
 from advgame.evaluation.columns import COLUMN_KINDS, adversary_columns, describe_column
@@ -142,15 +143,21 @@ def run_job(job: EvalJob) -> list[dict[str, Any]]:
 class _Clocked:
     """A protagonist policy that marks its first action (`executor.first_action`).
 
-    Everything else is forwarded to the policy it wraps (white-box attacks see its methods).
+    Everything else is forwarded to the policy it wraps; a wrapped white-box policy is wrapped
+    in `_ClockedWhiteBox` instead, so that white-box attacks still see a `WhiteBox`.
     """
 
     def __init__(self, policy: Any) -> None:
         self._policy = policy
 
+    @property
+    def wrapped(self) -> Any:
+        """The wrapped policy."""
+        return self._policy
+
     def __getattr__(self, name: str) -> Any:
         value = getattr(self._policy, name)
-        if name.startswith("act") and callable(value):  # a batched act_* counts as acting too
+        if name.startswith("act_") and callable(value):  # a batched act_* counts as acting too
 
             def marked(*args: Any, **kwargs: Any) -> Any:
                 first_action()
@@ -169,6 +176,10 @@ class _Clocked:
         return self._policy.act(observation)
 
 
+class _ClockedWhiteBox(_Clocked, WhiteBoxForwarder):
+    """A `_Clocked` white-box policy: a `WhiteBox` on every Python (3.12+ checks statically)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class _ClockedSpec:
     """Builds `spec` (a spec, policy or callable) wrapped in `_Clocked`."""
@@ -176,10 +187,11 @@ class _ClockedSpec:
     spec: Any
 
     def build(self, info: Any) -> _Clocked:
-        """Build the wrapped policy for `info`'s agent."""
+        """Build the wrapped policy for `info`'s agent (a `WhiteBox` if the policy is one)."""
         from advgame.core.policy import as_policy
 
-        return _Clocked(as_policy(self.spec, info))
+        policy = as_policy(self.spec, info)
+        return _ClockedWhiteBox(policy) if isinstance(policy, WhiteBox) else _Clocked(policy)
 
 
 def _clocked(job: EvalJob) -> EvalJob:
