@@ -90,3 +90,38 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
             item.location[1] or 0,
             f"extra missing: {call.excinfo.value}",
         )
+
+
+CORE_FILES = frozenset(
+    f"test_{name}.py"
+    for name in (
+        "game", "views", "vector", "lockstep", "disruptors", "dynamics",
+        "evaluation", "batched_eval", "evaluate_any", "threat_model", "policy_wrappers",
+        "whitebox", "sb3", "training", "cli", "not_applicable", "robust_sarsa", "attack_batch",
+        "fuzz_config", "fuzz_train_eval", "corrupt_files", "sa_ppo", "pgd_at",
+        "train_config_game",
+    )
+)  # fmt: skip
+"""The modules of the core subset (marker ``core``): the game, its views and vector paths,
+disruptors, evaluation, white-box attacks, SB3 training and the CLI. CI runs it again, unlocked,
+on the newest Python pyenv has (`.ci/run`); so can you: ``pytest -m "core and not slow"``."""
+
+CORE_FAMILIES = frozenset({"mujoco"})
+"""Conformance cases in the core subset: Gymnasium's own MuJoCo tasks (no extra needed)."""
+
+
+def _is_core(item: pytest.Item) -> bool:
+    if item.path.name in CORE_FILES:
+        return True
+    if item.path.name != "test_conformance.py" or not hasattr(item, "callspec"):
+        return False
+    from advgame.core.registry import scenario_spec
+
+    return scenario_spec(item.callspec.params["sid"]).family in CORE_FAMILIES
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark the core subset ``core`` (see `CORE_FILES`)."""
+    for item in items:
+        if _is_core(item):
+            item.add_marker(pytest.mark.core)

@@ -29,8 +29,16 @@ SHORT_FAMILIES = {"robosuite", "maze", "fetch", "hand", "adroit", "kitchen"}
 """Families whose steps are slow (robosuite: ~4-100 ms a step; gymnasium-robotics: 0.3-3 ms,
 many ids): short horizons in these tests."""
 
+
+def _needs_extra(sid: str) -> pytest.MarkDecorator:
+    """Skips the cases of a scenario whose extra is not installed (e.g. an unlocked install)."""
+    spec = scenario_spec(sid)
+    reason = f"{sid} needs the {spec.extra} extra ({', '.join(spec.missing())} not installed)"
+    return pytest.mark.skipif(bool(spec.missing()), reason=reason)
+
+
 CASES = [
-    pytest.param(sid, name, id=f"{sid}:{name}")
+    pytest.param(sid, name, id=f"{sid}:{name}", marks=_needs_extra(sid))
     for sid in advgame.list_scenarios()
     for name in scenario_spec(sid).load_presets()
 ]

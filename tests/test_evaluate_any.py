@@ -243,7 +243,7 @@ def test_a_population_and_a_preset_from_the_cli_then_a_moved_folder_re_reports(
 def test_a_team_checkpoint_plays_as_its_run_does(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    pytest.importorskip("gymnasium_robotics", reason="MaMuJoCo needs the mamujoco extra")
+    pytest.importorskip("gymnasium_robotics", reason="MA-HalfCheetah-2x3 needs the mamujoco extra")
     monkeypatch.chdir(tmp_path)
     args = ["train", "--scenario", "MA-HalfCheetah-2x3", "--preset", "partial"]
     args += ["--iterations", "1", "--protagonist-steps", "128", "--adversary-steps", "128"]

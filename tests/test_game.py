@@ -584,6 +584,7 @@ def test_bad_observation_adversary_action_on_the_sense_move(game: advgame.Game, 
 
 @pytest.mark.parametrize("bad", [7, 1.5, -1, [1], None, "left", math.nan, math.inf])
 def test_bad_discrete_protagonist_action(bad: Any) -> None:
+    pytest.importorskip("Box2D", reason="LunarLander-v3 needs the box2d extra")
     game = advgame.make("LunarLander-v3")
     game.reset(seed=0)
     game.step(fillers(game))  # the default preset's observation adversary senses first

@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-import supersuit as ss
 import torch
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 from stable_baselines3 import PPO
@@ -39,6 +38,8 @@ from advgame.disruptors import ObservationDisruptor
 from advgame.errors import ActionError, ConfigError
 from advgame.training.checkpoint import SB3Checkpoint, SB3Policy
 from advgame.training.learning import EpisodeStats, Side
+
+ss = pytest.importorskip("supersuit", reason="the mamujoco extra: pip install '.[mamujoco]'")
 
 SID = "MA-HalfCheetah-2x3"
 PRESETS = ["default", "partial"]

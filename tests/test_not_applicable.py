@@ -91,25 +91,3 @@ def test_the_cli_writes_a_complete_report_with_na_cells(model: Path, tmp_path: P
     assert "## Cells not applicable" in report and "white-box access" in report
     assert "| still | " in report and "n/a" in report.split("## Payoff matrix")[1]
     assert (out / "heatmap.png").stat().st_size > 0
-
-
-def test_the_timed_wrapper_of_a_white_box_policy_is_a_white_box_on_every_python(
-    model: Path,
-) -> None:
-    """Python 3.12+ checks protocols on the class: the wrapper's methods must be real ones."""
-    import inspect
-
-    from advgame.core.policy import WhiteBox
-    from advgame.core.registry import make
-    from advgame.evaluation.running import _ClockedSpec
-
-    game = make("InvertedPendulum-v5", disruptors={})
-    info = game.agent_info("protagonist")
-    wrapped = _ClockedSpec(sb3_protagonist(model, raw_observations=True)).build(info)
-    assert isinstance(wrapped, WhiteBox)
-    for name in ("action_mean", "action_std", "value", "q_value"):
-        assert callable(inspect.getattr_static(wrapped, name))  # what 3.12's isinstance sees
-    plain = _ClockedSpec(still).build(info)
-    assert not isinstance(plain, WhiteBox)
-    assert wrapped.act(np.zeros(4)).shape == (1,)
-    game.close()

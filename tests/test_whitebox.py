@@ -180,6 +180,7 @@ def _state_bytes_of(optimizer: torch.optim.Optimizer) -> bytes:
 def test_mad_attacks_a_team_of_actors() -> None:
     from advgame.agents.marl_nets import GaussianActor, TorchActorPolicy, actor_record
 
+    pytest.importorskip("gymnasium_robotics", reason="MA-HalfCheetah-2x3 needs the mamujoco extra")
     game = advgame.make(
         "MA-HalfCheetah-2x3", disruptors=[ObservationDisruptor(eps=0.1)], max_episode_steps=8
     )

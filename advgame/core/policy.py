@@ -28,6 +28,7 @@ __all__ = [
     "Policy",
     "PolicySpec",
     "WhiteBox",
+    "WhiteBoxForwarder",
     "act_batch",
     "as_policy",
 ]
@@ -77,6 +78,40 @@ class WhiteBox(Protocol):
 
     def q_value(self, obs: Any, action: Any) -> Any:
         """The action-value estimate ``Q(obs, action)`` (``[batch]``), or ``None``."""
+
+
+class WhiteBoxForwarder:
+    """Mixin for a wrapper of a `WhiteBox` policy: the four methods, forwarded to `wrapped`.
+
+    Since Python 3.12, ``isinstance(x, WhiteBox)`` looks the methods up statically
+    (`inspect.getattr_static`), so a wrapper whose ``__getattr__`` forwards to a white-box
+    policy is not one. A wrapper class ``W`` with a ``wrapped`` property therefore has a
+    white-box variant with this mixin last (``class _WhiteBoxW(W, WhiteBoxForwarder)``, so that
+    ``W.wrapped`` wins), and whoever builds the wrapper picks that variant exactly when the
+    policy it wraps is a `WhiteBox`: a wrapped black-box policy is still refused by white-box
+    attacks with their clear error.
+    """
+
+    @property
+    def wrapped(self) -> Any:
+        """The white-box policy that answers (the wrapper defines it)."""
+        raise NotImplementedError(f"{type(self).__name__} must define the `wrapped` property.")
+
+    def action_mean(self, obs: Any) -> Any:
+        """The wrapped policy's `WhiteBox.action_mean`."""
+        return self.wrapped.action_mean(obs)
+
+    def action_std(self) -> Any:
+        """The wrapped policy's `WhiteBox.action_std`."""
+        return self.wrapped.action_std()
+
+    def value(self, obs: Any) -> Any:
+        """The wrapped policy's `WhiteBox.value`."""
+        return self.wrapped.value(obs)
+
+    def q_value(self, obs: Any, action: Any) -> Any:
+        """The wrapped policy's `WhiteBox.q_value`."""
+        return self.wrapped.q_value(obs, action)
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from advgame.core.policy import WhiteBox
+from advgame.core.policy import WhiteBox, WhiteBoxForwarder
 from advgame.errors import ConfigError
 from advgame.evaluation.applicable import not_applicable
 from advgame.evaluation.batched import LOCKSTEP_EPISODES
@@ -62,18 +62,21 @@ def run_job(job: EvalJob) -> list[dict[str, Any]]:
 class _Clocked:
     """A protagonist policy that marks its first action (`executor.first_action`).
 
-    Everything else is forwarded to the policy it wraps (`__getattr__`). A wrapped white-box
-    policy is wrapped in `_ClockedWhiteBox`, whose white-box methods are real methods: since
-    Python 3.12, ``isinstance`` against a runtime-checkable protocol looks methods up on the
-    class, so a forwarding ``__getattr__`` alone no longer makes the wrapper a `WhiteBox`.
+    Everything else is forwarded to the policy it wraps; a wrapped white-box policy is wrapped
+    in `_ClockedWhiteBox` instead, so that white-box attacks still see a `WhiteBox`.
     """
 
     def __init__(self, policy: Any) -> None:
         self._policy = policy
 
+    @property
+    def wrapped(self) -> Any:
+        """The wrapped policy."""
+        return self._policy
+
     def __getattr__(self, name: str) -> Any:
         value = getattr(self._policy, name)
-        if name.startswith("act") and callable(value):  # a batched act_* counts as acting too
+        if name.startswith("act_") and callable(value):  # a batched act_* counts as acting too
 
             def marked(*args: Any, **kwargs: Any) -> Any:
                 first_action()
@@ -92,24 +95,8 @@ class _Clocked:
         return self._policy.act(observation)
 
 
-class _ClockedWhiteBox(_Clocked):
-    """A `_Clocked` white-box policy: attacks differentiate the wrapped policy's networks."""
-
-    def action_mean(self, obs: Any) -> Any:
-        """The wrapped policy's mean action (`WhiteBox.action_mean`)."""
-        return self._policy.action_mean(obs)
-
-    def action_std(self) -> Any:
-        """The wrapped policy's action std (`WhiteBox.action_std`)."""
-        return self._policy.action_std()
-
-    def value(self, obs: Any) -> Any:
-        """The wrapped policy's value estimate (`WhiteBox.value`)."""
-        return self._policy.value(obs)
-
-    def q_value(self, obs: Any, action: Any) -> Any:
-        """The wrapped policy's action value (`WhiteBox.q_value`)."""
-        return self._policy.q_value(obs, action)
+class _ClockedWhiteBox(_Clocked, WhiteBoxForwarder):
+    """A `_Clocked` white-box policy: a `WhiteBox` on every Python (3.12+ checks statically)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,7 +106,7 @@ class _ClockedSpec:
     spec: Any
 
     def build(self, info: Any) -> _Clocked:
-        """Build the wrapped policy for `info`'s agent."""
+        """Build the wrapped policy for `info`'s agent (a `WhiteBox` if the policy is one)."""
         from advgame.core.policy import as_policy
 
         policy = as_policy(self.spec, info)

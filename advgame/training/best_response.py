@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.policy import WhiteBox, WhiteBoxForwarder, as_policy
 from advgame.errors import ConfigError
 
 __all__ = ["BestResponseJob", "MixturePolicy", "MixtureSpec", "train_best_response"]
@@ -37,6 +38,11 @@ class MixturePolicy:
         self.rng = np.random.default_rng(seed)
         self.current = policies[0]
 
+    @property
+    def wrapped(self) -> Any:
+        """The policy playing this episode."""
+        return self.current
+
     def __getattr__(self, name: str) -> Any:  # e.g. observation_std of the drawn checkpoint
         return getattr(self.__dict__.get("current"), name)
 
@@ -50,6 +56,10 @@ class MixturePolicy:
     def act(self, observation: Any) -> Any:
         """Act as this episode's policy."""
         return self.current.act(observation)
+
+
+class _WhiteBoxMixture(MixturePolicy, WhiteBoxForwarder):
+    """A mixture of white-box policies: a `WhiteBox` on every Python (3.12+ checks statically)."""
 
 
 @dataclass(frozen=True)
@@ -73,11 +83,11 @@ class MixtureSpec:
             raise ConfigError(f"Mixture weights must be >= 0 and sum to 1, got {self.weights}.")
 
     def build(self, info: Any) -> MixturePolicy:
-        """Build every member's policy for `info`'s agent."""
-        from advgame.core.policy import as_policy
-
+        """Build every member's policy for `info`'s agent (a `WhiteBox` if every one is)."""
         w = np.asarray(self.weights, dtype=float)
-        return MixturePolicy([as_policy(s, info) for s in self.specs], w / w.sum(), self.seed)
+        policies = [as_policy(s, info) for s in self.specs]
+        white = all(isinstance(p, WhiteBox) for p in policies)
+        return (_WhiteBoxMixture if white else MixturePolicy)(policies, w / w.sum(), self.seed)
 
 
 @dataclass(frozen=True, kw_only=True)
