@@ -23,7 +23,8 @@ the threat model, the optimal attack's budget)::
 
 `run_campaign` trains every run that is not finished, two (``workers``) at a time as jobs on
 the executor (a local process pool or Ray); a run that was interrupted resumes from its last
-iteration, a finished one is never trained again. It then evaluates every finished run's
+iteration (``runs/``), a finished one is compacted to its last checkpoint and moved to
+``finished/`` in one rename (small enough to commit; never trained again). It then evaluates every finished run's
 final protagonist in one table (finished evaluation units are read back, not replayed) and
 writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-attacks
 return, the interquartile range and the 95 % interval over seeds of its natural and
@@ -156,17 +157,57 @@ def _progress(run_dir: Path) -> int:
     return int(read_json(run_dir / "state.json", "run state", ("iteration",))["iteration"])
 
 
-def _train_unit(unit: tuple[Any, str]) -> str:
-    """Train or resume one run to its end (what a worker runs)."""
+def _train_unit(unit: tuple[Any, str, str]) -> str:
+    """Train or resume one run to its end, then keep it compact in ``finished/`` (a worker)."""
     from advgame.training import resume, train
 
-    config, run_dir = unit
-    path = Path(run_dir)
+    config, partial, finished = unit
+    path = Path(partial)
     if (path / "config.json").exists():
         resume(path, progress=False)
     else:
         train(config, path, progress=False)
-    return run_dir
+    compact(path)
+    Path(finished).parent.mkdir(parents=True, exist_ok=True)
+    path.rename(finished)  # one rename: ``finished/`` never holds half a run
+    return finished
+
+
+FINISHED = "finished"
+"""The campaign's folder of finished, compacted runs (``runs/`` holds those in training)."""
+
+
+def run_dir(out: Path, run: str) -> Path:
+    """Where run `run` of the campaign in `out` is: ``finished/RUN`` once done, else ``runs/RUN``."""
+    done = out / FINISHED / run
+    return done if done.exists() else out / "runs" / run
+
+
+def compact(run: Path) -> None:
+    """Keep what a finished run is evaluated and released from: its last checkpoint.
+
+    Earlier checkpoint folders and TensorBoard logs are deleted and the population keeps the
+    members whose files remain, so a finished run is a few hundred KB that can be committed
+    (``config.json``, ``state.json``, ``population.json``, ``progress.csv``, the last
+    checkpoint).
+    """
+    import shutil
+
+    from advgame.training.population import Population
+
+    state = read_json(run / "state.json", "run state", ("checkpoint",))
+    last = (run / state["checkpoint"]).resolve()
+    for folder in (run / "checkpoints").iterdir():
+        if folder.resolve() != last:
+            shutil.rmtree(folder)
+    shutil.rmtree(run / "tb", ignore_errors=True)
+    population = Population.load(run / "population.json")
+    population.members = [m for m in population if _files_exist(m.spec)]
+    population.save(run / "population.json")
+
+
+def _files_exist(spec: Any) -> bool:
+    return all(Path(getattr(spec, f)).exists() for f in ("path",) if getattr(spec, f, None))
 
 
 def run_campaign(
@@ -202,13 +243,15 @@ def run_campaign(
     if stage in ("train", "all"):
         todo = [
             r for r in campaign.runs()
-            if _progress(out / "runs" / r) < campaign.config(r).iterations
+            if _progress(run_dir(out, r)) < campaign.config(r).iterations
         ]  # fmt: skip
         todo = todo[:max_runs] if max_runs is not None else todo
         write_status(campaign, out, training=todo)
         if todo:
             log.info("campaign: training %d run(s): %s", len(todo), todo)
-            units = [(campaign.config(r), str(out / "runs" / r)) for r in todo]
+            units = [
+                (campaign.config(r), str(out / "runs" / r), str(out / FINISHED / r)) for r in todo
+            ]
             run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
                       address=address, max_retries=1)  # fmt: skip
     status = write_status(campaign, out)
@@ -238,7 +281,7 @@ def _evaluate(
 
     with use_executor(executor, address):
         evaluate_runs(
-            [out / "runs" / r for r in done],
+            [run_dir(out, r) for r in done],
             out / "results",
             seeds=campaign.eval_seeds,
             workers=workers,
@@ -255,7 +298,7 @@ def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) ->
     """Write ``status.json``: each run's state and iteration, and the evaluation's."""
     runs = {}
     for r in campaign.runs():
-        it, of = _progress(out / "runs" / r), campaign.config(r).iterations
+        it, of = _progress(run_dir(out, r)), campaign.config(r).iterations
         state = (
             "done"
             if it >= of

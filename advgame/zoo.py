@@ -187,6 +187,7 @@ def release_campaign(
     """
     import csv
 
+    from advgame.campaign import run_dir
     from advgame.evaluation import run_protagonist
 
     out = Path(out)
@@ -200,7 +201,7 @@ def release_campaign(
     env = campaign.scenario.split("-v")[0].lower()
     released = []
     for row in rows:
-        run = out / "runs" / row["median_agent"]
+        run = run_dir(out, row["median_agent"])
         cfg, spec = run_protagonist(run)
         sources = {"protagonist": Path(spec.path)}
         if spec.normalizer:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from advgame.campaign import load_campaign
+from advgame.campaign import load_campaign, run_dir
 from advgame.cli import main
 from advgame.errors import ConfigError, FileFormatError
 
@@ -31,7 +31,7 @@ seeds = 2
 
 
 def _stamps(out: Path, runs: list[str]) -> dict[str, int]:
-    return {r: (out / "runs" / r / "state.json").stat().st_mtime_ns for r in runs}
+    return {r: (run_dir(out, r) / "state.json").stat().st_mtime_ns for r in runs}
 
 
 @pytest.fixture(scope="module")
@@ -56,6 +56,13 @@ def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(grid: Path) -> Non
         "atla-s1": "pending",
     }
     before = _stamps(out, ["ppo-s0", "ppo-s1"])
+    for run in (
+        "ppo-s0",
+        "ppo-s1",
+    ):  # finished runs are compact, in finished/, nothing left in runs/
+        assert run_dir(out, run) == out / "finished" / run and not (out / "runs" / run).exists()
+        assert [f.name for f in (out / "finished" / run / "checkpoints").iterdir()] == ["iter_0001"]
+        assert not (out / "finished" / run / "tb").exists()
     assert main(["campaign", str(spec), "--workers", "2", "--no-progress"]) == 0
     assert _stamps(out, ["ppo-s0", "ppo-s1"]) == before  # finished runs are not trained again
     status = json.loads((out / "status.json").read_text())
