@@ -312,7 +312,11 @@ class _PSRO:
         folder = self.dir / "checkpoints" / job.name.replace("@", "_")
         folder.mkdir(parents=True, exist_ok=True)
         for name, blob in result["files"].items():
-            write_atomic(folder / name, blob)
+            path = folder / name
+            # a run killed after writing a member but before saving the population writes
+            # it again on resume: files already whole are left as they are (same bytes)
+            if not (path.is_file() and path.read_bytes() == blob):
+                write_atomic(path, blob)
         norm = str(folder / result["normalizer"]) if result["normalizer"] else None
         spec = SB3Checkpoint(str(folder / result["model"]), result["algo"], norm)
         side = "protagonist" if job.agent == PROTAGONIST else "adversary"

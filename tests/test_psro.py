@@ -105,7 +105,8 @@ def test_a_sigkilled_run_resumes_without_recomputing(whole_run: Path, tmp_path: 
     )
     resume_psro(run)
     after = _mtimes(run)
-    assert all(after.get(k) == v for k, v in before.items())  # nothing finished was redone
+    redone = sorted(k for k, v in before.items() if after.get(k) != v)
+    assert not redone, f"finished files written again on resume: {redone}"
     assert json.loads((run / "meta.json").read_text()) == load_meta(whole_run)  # as if never killed
 
 
@@ -142,3 +143,39 @@ def test_a_run_directory_is_not_started_twice_and_configs_are_checked(whole_run:
         run_psro(
             PSROConfig(scenario="InvertedPendulum-v5", adversary="wind"), whole_run.parent / "x"
         )
+
+
+def test_unit_keys_depend_on_values_not_on_shared_objects() -> None:
+    """A spec built here and the same spec read back from JSON name the same part file."""
+    from advgame.evaluation.executor import unit_key
+    from advgame.training.checkpoint import SB3Checkpoint
+
+    path = "/runs/x/protagonist.zip"
+    shared = (SB3Checkpoint(path, "ppo", None), SB3Checkpoint(path, "ppo", None))
+    copies = json.loads(json.dumps([[path, "ppo"], [path, "ppo"]]))
+    read_back = tuple(SB3Checkpoint(p, a, None) for p, a in copies)
+    assert shared[0].path is shared[1].path and read_back[0].path is not read_back[1].path
+    assert unit_key(shared) == unit_key(read_back)
+    assert unit_key(shared) != unit_key((shared[0], SB3Checkpoint(path, "sac", None)))
+
+
+def test_a_run_killed_between_members_and_population_resumes_without_redoing(
+    tmp_path: Path,
+) -> None:
+    """Killed after writing iteration 1's members, before saving the population or meta-game:
+    the resume reads both best responses back from their part files and leaves their
+    checkpoint files as they are."""
+    import dataclasses
+
+    run = run_psro(dataclasses.replace(TINY, iterations=1), tmp_path / "run")
+    members = json.loads((run / "population.json").read_text())
+    (run / "population.json").write_text(json.dumps([m for m in members if m["iteration"] < 1]))
+    (run / "meta.json").write_text(json.dumps(load_meta(run)[:1]))
+    before = _mtimes(run)
+    jobs = sorted(p.name for p in (run / "jobs").glob("*.pkl"))
+    resume_psro(run)
+    after = _mtimes(run)
+    assert sorted(p.name for p in (run / "jobs").glob("*.pkl")) == jobs  # no job run again
+    redone = sorted(k for k, v in before.items() if k.startswith("checkpoints/") and after[k] != v)
+    assert not redone, f"checkpoint files written again: {redone}"
+    assert [m["iteration"] for m in load_meta(run)] == [0, 1]

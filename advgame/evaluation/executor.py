@@ -45,8 +45,8 @@ from advgame.evaluation.units import (
     _read_part,
     digest,
     first_action,
-    pickled,
     ship,
+    unit_key,
 )
 
 __all__ = [
@@ -58,6 +58,7 @@ __all__ = [
     "first_action",
     "run_units",
     "ship",
+    "unit_key",
     "write_timings",
 ]
 
@@ -133,7 +134,7 @@ def run_units(
     if parts is not None:
         parts.mkdir(parents=True, exist_ok=True)
     needs_pickle = parts is not None or executor != "local" or (workers > 1 and len(units) > 1)
-    keys = [digest(pickled(u)) if needs_pickle else f"unit-{i}" for i, u in enumerate(units)]
+    keys = [unit_key(u) if needs_pickle else f"unit-{i}" for i, u in enumerate(units)]
     records: list[UnitRecord | None] = [_read_part(parts, k) for k in keys]
     todo = [i for i, r in enumerate(records) if r is None]
     if len(todo) < len(units):

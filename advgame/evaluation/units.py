@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import io
 import logging
 import os
 import pickle
@@ -84,6 +85,22 @@ def _name(unit: Any) -> str:
 def digest(blob: bytes) -> str:
     """A stable name of a pickled unit: the SHA-256 of its pickle (24 hex digits)."""
     return hashlib.sha256(blob).hexdigest()[:24]
+
+
+def unit_key(unit: Any) -> str:
+    """The name of a unit's part file: the digest of its pickle written without a memo.
+
+    A plain pickle refers back to an object it has already written, so two equal units differ
+    when one shares a string between fields and the other holds two equal copies (a spec built
+    in this process vs. one read back from JSON): a resumed run would then miss its finished
+    part files and redo them. Without the memo the pickle depends on the values alone.
+    """
+    pickled(unit)  # a unit that cannot be pickled is a ConfigError saying what to change
+    buf = io.BytesIO()
+    pickler = pickle.Pickler(buf, protocol=pickle.HIGHEST_PROTOCOL)
+    pickler.fast = True  # no memo: every occurrence of a value is written out in full
+    pickler.dump(unit)
+    return digest(buf.getvalue())
 
 
 # -- instrumenting the first action ---------------------------------------------------------
