@@ -220,6 +220,7 @@ def run_campaign(
     stage: str = "all",
     max_runs: int | None = None,
     progress: bool = True,
+    only: Sequence[str] | None = None,
 ) -> Path:
     """Train what is not finished, evaluate, write the table; return ``campaign.md``.
 
@@ -232,6 +233,8 @@ def run_campaign(
         stage: ``"train"``, ``"evaluate"`` (finished runs only) or ``"all"``.
         max_runs: train at most this many unfinished runs now (the rest another time).
         progress: progress bars for the evaluation.
+        only: train only these runs (``METHOD-sSEED``), in this order: how a session picks the
+            pieces that fit its time.
 
     """
     from advgame.evaluation.executor import run_units
@@ -241,10 +244,13 @@ def run_campaign(
     out = Path(out)
     (out / "runs").mkdir(parents=True, exist_ok=True)
     if stage in ("train", "all"):
-        todo = [
-            r for r in campaign.runs()
-            if _progress(run_dir(out, r)) < campaign.config(r).iterations
-        ]  # fmt: skip
+        names = campaign.runs() if only is None else list(only)
+        unknown = sorted(set(names) - set(campaign.runs()))
+        if unknown:
+            raise ConfigError(
+                f"No run {unknown[0]!r} in the campaign; its runs: {', '.join(campaign.runs())}."
+            )
+        todo = [r for r in names if _progress(run_dir(out, r)) < campaign.config(r).iterations]
         todo = todo[:max_runs] if max_runs is not None else todo
         write_status(campaign, out, training=todo)
         if todo:

@@ -26,6 +26,8 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
     p.add_argument("--stage", choices=("all", "train", "evaluate"), default="all",
                    help="only train, only evaluate finished runs, or both (default)")  # fmt: skip
     p.add_argument("--max-runs", type=int, metavar="K", help="train at most K unfinished runs now")
+    p.add_argument("--runs", metavar="RUN,...",
+                   help="train only these runs (METHOD-sSEED, comma-separated), in this order")  # fmt: skip
     p.add_argument("--status", action="store_true", help="print what is done and stop")
     p.add_argument("--release", metavar="ZOO", nargs="?", const="", default=None,
                    help="after the table, copy each method's median agent into the zoo "
@@ -52,6 +54,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     path = run_campaign(
         campaign, out, workers=args.workers, executor=args.executor, address=args.address,
         stage=args.stage, max_runs=args.max_runs, progress=not args.no_progress,
+        only=[r.strip() for r in args.runs.split(",") if r.strip()] if args.runs else None,
     )  # fmt: skip
     print(f"campaign: {path}")
     if args.release is not None and args.stage != "train":

@@ -42,11 +42,18 @@ def grid(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return spec
 
 
-def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(grid: Path) -> None:
+def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(
+    grid: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     spec, tmp_path = grid, grid.parent
     out = tmp_path / "tiny"
     first = ["campaign", str(spec), "--workers", "1", "--no-progress"]
-    assert main([*first, "--stage", "train", "--max-runs", "2"]) == 0
+    assert main([*first, "--stage", "train", "--runs", "ppo-s7"]) == 2
+    assert "No run 'ppo-s7' in the campaign; its runs: ppo-s0" in capsys.readouterr().err
+    assert main([*first, "--stage", "train", "--runs", "ppo-s1"]) == 0  # a chosen piece
+    status = json.loads((out / "status.json").read_text())
+    assert [r for r, s in status["runs"].items() if s["state"] == "done"] == ["ppo-s1"]
+    assert main([*first, "--stage", "train", "--max-runs", "1"]) == 0  # the next unfinished one
     status = json.loads((out / "status.json").read_text())
     states = {r: s["state"] for r, s in status["runs"].items()}
     assert states == {
