@@ -134,6 +134,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         budgets=BUDGETS if args.budgets is None else args.budgets,
         threat=args.threat,
         zoo=args.zoo or [],
+        zoo_adversaries=args.zoo_adversaries,
     )
     print(f"report: {out}")
     return 0
@@ -172,9 +173,14 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from advgame.evaluation.demo import demo
+    from advgame.evaluation.demo import demo, demo_zoo, zoo_summary
 
-    print(f"report: {demo(Path(args.out), quick=args.quick, workers=args.workers)}")
+    out = Path(args.out)
+    zoo_report = demo_zoo(out / "zoo", quick=args.quick, workers=args.workers)
+    if zoo_report is not None:
+        print(zoo_summary(zoo_report.parent))
+        print(f"zoo report: {zoo_report}")
+    print(f"report: {demo(out, quick=args.quick, workers=args.workers)}")
     return 0
 
 
@@ -207,6 +213,11 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
         ("--zoo", "ID", "a released zoo agent (advgame zoo list), e.g. hopper/ppo"),
     ):
         p.add_argument(flag, action="append", metavar=metavar, help=f"{text} (repeatable)")
+    p.add_argument(
+        "--zoo-adversaries",
+        action="store_true",
+        help="add the 'attack optimal' column: each --zoo agent against its released adversary",
+    )
     p.add_argument(
         "--adversaries",
         nargs="+",
@@ -353,7 +364,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("folder", help="a folder written by `advgame evaluate` or `advgame demo`")
     p.set_defaults(func=_cmd_report)
 
-    p = sub.add_parser("demo", help="train PPO and ATLA-PPO briefly, evaluate, write a report")
+    p = sub.add_parser(
+        "demo",
+        help="the released Hopper agents under attack; PPO and ATLA-PPO trained briefly, evaluated",
+    )
     p.add_argument("--out", default="reports/demo", help="output folder (default reports/demo)")
     p.add_argument("--quick", action="store_true", help="a much shorter run (for smoke tests)")
     p.add_argument("--workers", type=int, default=2, help="evaluation worker processes")

@@ -132,6 +132,20 @@ def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
     assert main(["evaluate", "--zoo", "hopper/ppo", "--zoo", "hopper/atla", "--out", str(out),
                  "--seeds", "1", "--workers", "1", "--adversaries", "nominal", "--budgets"]) == 0  # fmt: skip
     assert "hopper/atla" in (out / "report.md").read_text()
+    # each agent against its own released adversary: the demo's zoo table
+    from advgame.evaluation.demo import demo_zoo, zoo_summary
+    from advgame.evaluation.payoff import PayoffTable
+
+    report = demo_zoo(tmp_path / "demo-zoo", quick=True, workers=1, root=root)
+    assert report is not None
+    table = PayoffTable.from_csv(report.parent / "payoff.csv")
+    assert table.protagonists == ["hopper/atla"]  # PPO has no adversary to play
+    assert set(table.adversaries) == {"nominal", "attack mad", "attack optimal"}
+    assert "hopper/atla" in zoo_summary(report.parent)
+    capsys.readouterr()
+    both = ["evaluate", "--zoo", "hopper/ppo", "--zoo", "hopper/atla", "--zoo-adversaries"]
+    assert main([*both, "--out", str(tmp_path / "x"), "--budgets"]) == 2
+    assert "released without an adversary" in capsys.readouterr().err
     (root / found["hopper/ppo"].files["protagonist"]["path"]).write_bytes(b"changed")
     with pytest.raises(FileFormatError, match="sha256"):
         zoo.load("hopper/ppo")

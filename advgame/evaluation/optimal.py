@@ -24,7 +24,7 @@ import numpy as np
 from advgame.errors import ConfigError
 from advgame.evaluation.jobs import EvalJob
 
-__all__ = ["OPTIMAL", "OPTIMAL_GRID", "OptimalSearch", "optimal_jobs"]
+__all__ = ["OPTIMAL", "OPTIMAL_GRID", "OptimalSearch", "optimal_jobs", "released_jobs"]
 
 log = logging.getLogger(__name__)
 
@@ -98,6 +98,33 @@ def optimal_jobs(
         for n, f in found.items()
     }
     (out / "optimal.json").write_text(json.dumps(record, indent=2, default=str) + "\n")
+    kept = {n: f.spec for n, f in found.items()}
+    return released_jobs(
+        scenario, threat, agent, protagonists, kept, seeds=seeds, episodes=episodes
+    )
+
+
+def released_jobs(
+    scenario: str,
+    threat: str,
+    agent: str,
+    protagonists: Mapping[str, Any],
+    adversaries: Mapping[str, Any],
+    *,
+    seeds: Sequence[int],
+    episodes: int = 1,
+) -> list[EvalJob]:
+    """The ``attack optimal`` column from adversaries already found: each row plays its own.
+
+    `adversaries` is ``{protagonist: spec of its strongest learned adversary}``, from a search
+    (`optimal_jobs`) or released with the agent (`advgame.zoo.load(..., adversary=True)`); it
+    plays `agent` of `scenario` in the `threat` preset. Every protagonist needs one.
+    """
+    missing = sorted(set(protagonists) - set(adversaries))
+    if missing:
+        raise ConfigError(
+            f"No adversary for {missing} in the {OPTIMAL!r} column; every row plays its own."
+        )
     return [
         EvalJob(
             scenario=scenario,
@@ -105,7 +132,7 @@ def optimal_jobs(
             protagonist=name,
             protagonist_spec=protagonists[name],
             adversary=OPTIMAL,
-            adversary_specs={agent: found[name].spec},
+            adversary_specs={agent: adversaries[name]},
             seeds=tuple(seeds),
             episodes=episodes,
         )

@@ -37,7 +37,7 @@ from advgame.evaluation.columns import (
     describe_column,
     observation_agent,
 )
-from advgame.evaluation.optimal import OPTIMAL, OptimalSearch, optimal_jobs
+from advgame.evaluation.optimal import OPTIMAL, OptimalSearch, optimal_jobs, released_jobs
 from advgame.evaluation.protagonists import check_protagonists, cli_protagonists, run_protagonist
 
 __all__ = [
@@ -75,6 +75,7 @@ def evaluate_policies(
     threat: str | None = None,
     optimal: OptimalSearch | None = None,
     resume: bool = False,
+    released: Mapping[str, Any] | None = None,
 ) -> Path:
     """Evaluate fixed policies against chosen adversary columns; write the folder, return ``report.md``.
 
@@ -101,6 +102,9 @@ def evaluate_policies(
         resume: keep each finished unit of the table as a part file in ``out/parts`` and read
             it back instead of playing it again (for folders whose protagonists never change,
             such as a campaign's finished runs).
+        released: ``{protagonist: adversary spec}``: the ``attack optimal`` column from
+            adversaries found before (those released with zoo agents), each row playing its
+            own, instead of a search (`optimal`).
 
     """
     out = Path(out)
@@ -132,10 +136,16 @@ def evaluate_policies(
     ]
     out.mkdir(parents=True, exist_ok=True)
     threat = threat or default_threat(scenario)
+    if optimal is not None and released is not None:
+        raise ConfigError("Search the optimal attack or play released adversaries, not both.")
     if optimal is not None:
         agent = observation_agent(scenario, threat)
         jobs += optimal_jobs(scenario, threat, agent, protagonists, optimal, out, seeds=seed_list,
                              episodes=episodes)  # fmt: skip
+    if released is not None:
+        agent = observation_agent(scenario, threat)
+        jobs += released_jobs(scenario, threat, agent, protagonists, released, seeds=seed_list,
+                              episodes=episodes)  # fmt: skip
     table = evaluate(jobs, workers=workers, progress=progress, results_dir=out if resume else None)
     table.to_csv(out / "payoff.csv")
     if optimal is not None:
@@ -151,6 +161,11 @@ def evaluate_policies(
         columns_json[OPTIMAL] = {
             "game": {"preset": threat},
             "adversaries": {agent: f"{searched} ({optimal.steps} steps each; optimal.json)"},
+        }
+    if released is not None:
+        columns_json[OPTIMAL] = {
+            "game": {"preset": threat},
+            "adversaries": {agent: "each protagonist's own learned adversary, as released"},
         }
     (out / "columns.json").write_text(json.dumps(columns_json, indent=2, default=str) + "\n")
     record = _threat_record(scenario, threat)
@@ -263,17 +278,27 @@ def evaluate_runs(
     threat: str | None = None,
     resume: bool = False,
     zoo: Sequence[str] = (),
+    zoo_adversaries: bool = False,
+    zoo_root: str | Path | None = None,
 ) -> Path:
     """What ``advgame evaluate`` runs, through `evaluate_policies`; return ``report.md``.
 
     The protagonists are the runs' final ones, released zoo agents (`zoo`: ids such as
     ``hopper/ppo``, checked against the manifest) and fixed policies given as ``NAME=...``
     strings (`cli_protagonists`); the scenario is `scenario`, the runs' or the zoo agents'.
+    `zoo_adversaries` adds the ``attack optimal`` column played by each zoo agent's released
+    adversary (only zoo agents then, all released with one, in their threat model); the zoo is
+    `zoo_root` (default `advgame.zoo.default_root`).
     """
     from advgame import zoo as zoo_
 
     found = {Path(r).name: (run_protagonist(Path(r)), Path(r)) for r in runs}
-    released = {z: (zoo_.entry(z), zoo_.load(z)) for z in zoo}
+    released = {z: (zoo_.entry(z, zoo_root), zoo_.load(z, zoo_root)) for z in zoo}
+    own = None
+    if zoo_adversaries:
+        others = bool(runs or checkpoints or callables or teams)
+        own = _zoo_adversaries(released, threat, others, zoo_root)
+        threat = threat or next(iter(released.values()))[0].threat
     scenarios = {str(cfg.scenario) for (cfg, _), _ in found.values()}
     scenarios |= {e.scenario for e, _ in released.values()}
     scenarios |= {scenario} if scenario else set()
@@ -302,7 +327,33 @@ def evaluate_runs(
         sid, protagonists, out, adversaries=adversaries, runs={n: d for n, (_, d) in found.items()},
         last=last, sample=sample, seed=seed, seeds=seeds, episodes=episodes, workers=workers,
         budgets=budgets, progress=progress, threat=threat, optimal=search, resume=resume,
+        released=own,
     )  # fmt: skip
+
+
+def _zoo_adversaries(
+    released: Mapping[str, tuple[Any, Any]],
+    threat: str | None,
+    others: bool,
+    root: str | Path | None,
+) -> dict[str, Any]:
+    """Each zoo agent's released adversary, checked to fit one table (see `evaluate_runs`)."""
+    from advgame import zoo as zoo_
+
+    if not released:
+        raise ConfigError("--zoo-adversaries needs zoo agents (--zoo ID; advgame zoo list).")
+    if others:
+        raise ConfigError(
+            "--zoo-adversaries plays each zoo agent's own adversary: evaluate the zoo agents "
+            "apart from runs, checkpoints and callables."
+        )
+    threats = {e.threat for e, _ in released.values()} | ({threat} if threat else set())
+    if len(threats) > 1:
+        raise ConfigError(
+            f"The zoo agents' adversaries were trained in threat models {sorted(threats)}; "
+            "a table has one (--threat): evaluate them apart."
+        )
+    return {z: zoo_.load(z, root, adversary=True) for z in released}
 
 
 def _write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:
