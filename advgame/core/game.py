@@ -40,8 +40,8 @@ from advgame.core.moves import (
     Move,
     missing_or_unknown,
     package,
-    protagonist_action,
 )
+from advgame.core.moving import Moves
 from advgame.core.policy import AgentInfo
 from advgame.core.schedule import PHASES, Schedule
 from advgame.core.task import TaskBase
@@ -53,7 +53,7 @@ __all__ = ["Game", "Move"]
 log = logging.getLogger(__name__)
 
 
-class Game(ParallelEnv):
+class Game(Moves, ParallelEnv):
     """A PettingZoo ParallelEnv of protagonists against bounded adversary agents.
 
     Build one with `advgame.make`. Args:
@@ -210,21 +210,6 @@ class Game(ParallelEnv):
         self._phase = value
         self._plan_schedules()
 
-    def _plan_schedules(self) -> None:
-        """Split the schedules into those constant in this phase and those drawn step by step.
-
-        When all are constant, each step's movers are too: `_begin_step` then reuses them.
-        """
-        self._constant, self._dynamic = {}, []
-        for a, d in self.disruptors.items():
-            value = d.schedule.constant(self._phase)
-            if value is None:
-                self._dynamic.append((a, d.schedule))
-            else:
-                self._constant[a] = value
-        if not self._dynamic:
-            self._fixed_movers = self._movers(self._constant)
-
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         """Start an episode: restore nominal parameters, reset the task, draw the first schedule.
 
@@ -285,21 +270,6 @@ class Game(ParallelEnv):
                 f"This {self.move} move needs actions for {missing} (game.next_movers)."
             )
 
-    def _setup(self, actions: Mapping[str, Any]) -> Move:
-        """The setup move at t = 0: workspace adversaries edit the simulator, then it is re-observed."""
-        clipped: dict[str, int] = {}
-        sim = self.task.sim
-        for d in self._setup_ds:
-            if self._active[d.agent]:
-                u, clipped[d.agent] = d.decode(actions[d.agent])
-                self._last[d.agent] = u
-                d.environment(sim, u)
-        self._setup_pending = False
-        obs = self.task.observe()
-        self._true_obs, self._state, self._shown = obs, self.task.state(obs), dict(obs)
-        self.move, self.next_movers = self._after_setup
-        return Move(SENSE, clipped)
-
     def observe(self, agent: str) -> Any:
         """What `agent` observes now: protagonists the (perturbed) observation, adversaries ``s_t``."""
         return self._shown[agent] if agent in self._shown else self._state
@@ -320,137 +290,6 @@ class Game(ParallelEnv):
     def close(self) -> None:
         """Close the task base."""
         self.task.close()
-
-    # -- moves ------------------------------------------------------------------------------
-    def _sense(self, actions: Mapping[str, Any]) -> Move:
-        if self._setup_pending:
-            return self._setup(actions)
-        shown = self._shown  # the game's own dict (`_begin_step` built it; nobody else holds it)
-        clipped: dict[str, int] = {}
-        active = self._active
-        for d in self._sensing:
-            if active[d.agent]:
-                u, clipped[d.agent] = d.decode(actions[d.agent])
-                self._last[d.agent] = u
-                d.observation(shown, u)
-        self.move = ACT
-        self.next_movers = self._act_next
-        return Move(SENSE, clipped)
-
-    def _act(self, actions: Mapping[str, Any]) -> Move:
-        used: dict[str, np.ndarray] = {}
-        clipped: dict[str, int] = {}
-        active = self._active
-        for d in self._act_ds:
-            if active[d.agent]:
-                u, clipped[d.agent] = d.decode(actions[d.agent])
-                used[d.agent] = self._last[d.agent] = u
-        acts: dict[str, Any] = {}
-        for p, (space, shape) in self._p_spaces.items():
-            acts[p] = protagonist_action(p, space, shape, actions[p])
-        if self._env_ds:
-            self._disrupt_environment(used)
-        for d in self._action_ds:
-            v = self._effective(d, used)
-            if v is not None:
-                d.action(acts, v, self._rng)
-        return self._step_task(acts, used, clipped)
-
-    def _step_task(
-        self, acts: dict[str, Any], used: dict[str, np.ndarray], clipped: dict[str, int]
-    ) -> Move:
-        """The rest of an act move once the (disrupted) protagonist actions are known."""
-        obs, reward, cost, terminated, truncated, info = self.task.step(acts)
-        payoff = reward - self.cost_weight * cost
-        self.last_reward = reward
-        self.episode_reward += reward
-        rewards = dict.fromkeys(self.protagonists, reward)
-        costs = dict.fromkeys(self.protagonists, cost)
-        for d in self._reward_ds:
-            v = self._effective(d, used)
-            if v is not None:
-                d.reward(rewards, costs, v)
-        self.t += 1
-        if terminated or truncated:
-            self._true_obs = self._shown = obs
-            self._state = self.task.state(obs)
-            self.agents = []
-            self.next_movers = frozenset()
-        else:
-            self._begin_step(obs, used)
-        return Move(ACT, clipped, rewards, costs, reward, cost, payoff, terminated, truncated, info)
-
-    def _disrupt_environment(self, used: dict[str, np.ndarray]) -> None:
-        # `_env_ds` lists model edits (dynamics, which may recompile the model) before data
-        # edits (forces), so forces land in the data of the model that will step.
-        sim = self.task.sim
-        epoch = sim.epoch
-        for d in self._model_ds:
-            d.environment(sim, used.get(d.agent))
-        if sim.epoch != epoch:  # a recompile dropped edits made before it on the old model
-            for d in self._model_ds:
-                d.environment(sim, None)
-        for d in self._data_ds:
-            d.environment(sim, used.get(d.agent))
-
-    # -- helpers ----------------------------------------------------------------------------
-    def _begin_step(self, obs: dict[str, Any], pending: dict[str, np.ndarray] | None) -> None:
-        """Record the true state of step t, draw its schedule, and build what agents see."""
-        self._true_obs = obs
-        self._state = self.task.state(obs)
-        if self._dynamic:
-            active = {**self._constant}
-            t, phase, rng = self.t, self._phase, self._rng
-            for a, schedule in self._dynamic:
-                active[a] = schedule.is_active(t, phase, rng)
-            sense_movers, self._act_next = self._movers(active)
-        else:
-            active = self._constant
-            sense_movers, self._act_next = self._fixed_movers
-        self._active = active
-        shown = dict(obs)
-        for d in self._stale:  # δ chosen in the act move that produced this observation
-            u = (pending or {}).get(d.agent)
-            if u is None and d.schedule.hold:
-                u = self._last.get(d.agent)
-            if u is not None:
-                d.observation(shown, u)
-        for d in self._held_sensing:
-            if not active[d.agent] and d.agent in self._last:
-                d.observation(shown, self._last[d.agent])
-        self._shown = shown
-        if sense_movers:
-            self.move, self.next_movers = SENSE, sense_movers
-        else:
-            self.move, self.next_movers = ACT, self._act_next
-        if self._setup_pending:  # t = 0: a setup move comes first, if a workspace adversary acts
-            setup = frozenset(d.agent for d in self._setup_ds if active[d.agent])
-            self._setup_pending = bool(setup)
-            if setup:
-                self._after_setup = (self.move, self.next_movers)
-                self.move, self.next_movers = SENSE, setup
-
-    def _movers(self, active: Mapping[str, bool]) -> tuple[frozenset[str], frozenset[str]]:
-        """Who moves in a step with these active disruptors: (sense move, act move)."""
-        sense = frozenset(d.agent for d in self._sensing if active[d.agent])
-        act = frozenset([*self.protagonists, *(d.agent for d in self._act_ds if active[d.agent])])
-        return sense, act
-
-    def _effective(self, d: Disruptor, used: dict[str, np.ndarray]) -> np.ndarray | None:
-        u = used.get(d.agent)
-        if u is None and d.schedule.hold:
-            u = self._last.get(d.agent)
-        return u
-
-    def _restore_environment(self) -> None:
-        if not (self._env_ds or self._setup_ds):
-            return
-        sim = self.task.sim
-        if not any(d.schedule.persist for d in self._env_ds):
-            sim.restore_model()
-        for d in self._setup_ds + self._env_ds:
-            if not d.schedule.persist:
-                d.restore(sim)
 
     def _known(self, agent: str) -> str:
         if agent not in self._obs_spaces:
