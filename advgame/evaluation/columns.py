@@ -37,7 +37,6 @@ to `COLUMN_KINDS`.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -48,6 +47,7 @@ import numpy as np
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 from advgame.evaluation.jobs import AdversarySetup
 from advgame.evaluation.payoff import NOMINAL
+from advgame.evaluation.snapshots import misfit, snapshots
 
 __all__ = [
     "ATTACKS",
@@ -134,7 +134,7 @@ def _learned(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str,
     for name, run_dir in runs.items():
         if not arg and not (run_dir / "population.json").is_file():
             continue  # an evaluated run without a population has no learned column
-        preset, snaps = _snapshots(ctx, run_dir, opts)
+        preset, snaps = snapshots(run_dir, opts)
         latest = {agent: m for it in sorted(snaps) for agent, m in snaps[it].items()}
         if latest:
             cols[f"learned ({name})"] = _learned_setup(ctx, preset, latest, opts)
@@ -144,7 +144,7 @@ def _learned(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str,
 def _population(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
     if not arg:
         raise ConfigError("population: needs a run directory or file, e.g. population:runs/atla.")
-    preset, snaps = _snapshots(ctx, Path(arg), opts)
+    preset, snaps = snapshots(Path(arg), opts)
     its = _select(sorted(snaps), opts, ctx)
     path = Path(arg)
     source = path.parent.name if path.name == "population.json" else path.stem
@@ -246,7 +246,7 @@ def _learned_setup(
     specs = {a: replace(m.spec, deterministic=True) for a, m in members.items()}
     chosen = opts.get("preset") or ctx.threat
     if chosen:
-        problem = _misfit(ctx.scenario, chosen, specs)
+        problem = misfit(ctx.scenario, chosen, specs)
         if problem:
             raise ConfigError(
                 f"{problem}; evaluate in the preset they were trained in ({trained_in!r}) with "
@@ -254,73 +254,8 @@ def _learned_setup(
             )
         return AdversarySetup({"preset": chosen}, specs)
     shared = default_threat(ctx.scenario)
-    preset = trained_in if _misfit(ctx.scenario, shared, specs) else shared
+    preset = trained_in if misfit(ctx.scenario, shared, specs) else shared
     return AdversarySetup({"preset": preset}, specs)
-
-
-@functools.lru_cache(maxsize=32)
-def _adversary_shapes(scenario: str, preset: str) -> dict[str, tuple[int, ...]]:
-    """Each adversary's action shape in `preset` of `scenario` (one game built per pair)."""
-    from advgame import make
-
-    game = make(scenario, preset=preset)
-    shapes = {a: tuple(game.action_space(a).shape or ()) for a in game.adversaries}
-    game.close()
-    return shapes
-
-
-def _misfit(scenario: str, preset: str, specs: Mapping[str, Any]) -> str:
-    """Why `specs` cannot act in `preset` of `scenario` ('' if they can)."""
-    from advgame.training.checkpoint import SB3Checkpoint, load_model
-
-    shapes = _adversary_shapes(scenario, preset)
-    for agent, spec in specs.items():
-        if agent not in shapes:
-            return (
-                f"A learned adversary plays {agent!r}, but the threat model {preset!r} of "
-                f"{scenario} has no such agent (it has {sorted(shapes)})"
-            )
-        if isinstance(spec, SB3Checkpoint):
-            have = tuple(load_model(str(spec.path), spec.algo).action_space.shape or ())
-            if have != shapes[agent]:
-                return (
-                    f"The learned {agent!r} acts with shape {have}, but in the threat model "
-                    f"{preset!r} of {scenario} it has {shapes[agent]}"
-                )
-    return ""
-
-
-def _snapshots(
-    ctx: ColumnContext, source: Path, opts: Mapping[str, str]
-) -> tuple[str, dict[int, dict[str, Any]]]:
-    """The preset and ``{iteration: {agent: learned adversary member}}`` of a run or file."""
-    from advgame.training.population import Population
-
-    file = source if source.suffix == ".json" else source / "population.json"
-    if not file.is_file():
-        raise ConfigError(
-            f"{source} has no population.json; give a run directory written by `advgame "
-            "train` or a population file."
-        )
-    snaps: dict[int, dict[str, Any]] = {}
-    for m in Population.load(file):
-        if m.side == "adversary" and m.learned:
-            snaps.setdefault(m.iteration, {})[m.agent] = m
-    return _preset_of(file, opts), snaps
-
-
-def _preset_of(file: Path, opts: Mapping[str, str]) -> str:
-    if "preset" in opts:
-        return opts["preset"]
-    config = file.parent / "config.json"
-    if not config.is_file():
-        raise ConfigError(
-            f"{file} is not in a run directory (no config.json beside it), so its preset is "
-            f"unknown; add it to the spec, e.g. population:{file},preset=atla."
-        )
-    import json
-
-    return str(json.loads(config.read_text()).get("preset", "default"))
 
 
 def _select(iterations: list[int], opts: Mapping[str, str], ctx: ColumnContext) -> list[int]:
