@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from advgame.core.config import read_json, write_atomic
-from advgame.errors import FileFormatError, UnknownNameError, did_you_mean
+from advgame.errors import ConfigError, FileFormatError, UnknownNameError, did_you_mean
 
 if TYPE_CHECKING:
     from advgame.campaign import Campaign
@@ -38,6 +38,7 @@ __all__ = [
     "load",
     "release",
     "release_campaign",
+    "released_adversaries",
     "verify",
 ]
 
@@ -154,6 +155,35 @@ def load(entry_id: str, root: str | Path | None = None, *, adversary: bool = Fal
         str(base / norm["path"]) if norm else None,
         deterministic=True,
     )
+
+
+def released_adversaries(
+    released: Mapping[str, tuple[Any, Any]],
+    threat: str | None,
+    others: bool,
+    root: str | Path | None,
+) -> dict[str, Any]:
+    """Each zoo agent's released adversary as a spec, checked to fit one table.
+
+    `released` is ``{id: (entry, protagonist spec)}``; `others` says whether the table has
+    protagonists other than zoo agents (then it is an error: each row plays its own adversary);
+    `threat` is the table's threat model, if given (the agents' must agree with it).
+    See `advgame.evaluation.suite.evaluate_runs` (``zoo_adversaries``).
+    """
+    if not released:
+        raise ConfigError("--zoo-adversaries needs zoo agents (--zoo ID; advgame zoo list).")
+    if others:
+        raise ConfigError(
+            "--zoo-adversaries plays each zoo agent's own adversary: evaluate the zoo agents "
+            "apart from runs, checkpoints and callables."
+        )
+    threats = {e.threat for e, _ in released.values()} | ({threat} if threat else set())
+    if len(threats) > 1:
+        raise ConfigError(
+            f"The zoo agents' adversaries were trained in threat models {sorted(threats)}; "
+            "a table has one (--threat): evaluate them apart."
+        )
+    return {z: load(z, root, adversary=True) for z in released}
 
 
 def release(entry: ZooEntry, sources: dict[str, Path], root: str | Path | None = None) -> ZooEntry:

@@ -23,8 +23,16 @@ import numpy as np
 
 from advgame.errors import ConfigError
 from advgame.evaluation.jobs import EvalJob
+from advgame.evaluation.payoff import NOMINAL, PayoffTable
 
-__all__ = ["OPTIMAL", "OPTIMAL_GRID", "OptimalSearch", "optimal_jobs", "released_jobs"]
+__all__ = [
+    "OPTIMAL",
+    "OPTIMAL_GRID",
+    "OptimalSearch",
+    "optimal_jobs",
+    "released_jobs",
+    "write_exploitability",
+]
 
 log = logging.getLogger(__name__)
 
@@ -208,3 +216,24 @@ def _search(
             for k, (g, m) in enumerate(zip(search.grid, means, strict=True))
         ]
     return found
+
+
+def write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:
+    """Write ``exploitability.json``: per protagonist, nominal and optimal-attack returns, the drop.
+
+    `table` holds the nominal and ``attack optimal`` columns; `steps` is each candidate's
+    training budget.
+    """
+    results = {}
+    for name in table.protagonists:
+        nom, att = table.values(name, NOMINAL), table.values(name, OPTIMAL)
+        if not (nom.size and att.size):
+            continue
+        results[name] = {
+            "preset": threat,
+            "nominal_return": float(nom.mean()),
+            "best_response_return": float(att.mean()),
+            "exploitability": float(nom.mean() - att.mean()),
+            "best_response_steps": float(steps),
+        }
+    (out / "exploitability.json").write_text(json.dumps(results, indent=2) + "\n")

@@ -27,6 +27,7 @@ from advgame.evaluation.plots import (
 __all__ = [
     "DEFAULT_COST_LIMIT",
     "adversary_listing",
+    "exploitability_md",
     "meta_game_section",
     "plot_budget_curve",
     "plot_heatmap",
@@ -236,3 +237,21 @@ def write_meta_report(run_dir: str | Path) -> Path:
     path = run_dir / "report.md"
     path.write_text(text + "\n")
     return path
+
+
+def exploitability_md(results: Mapping[str, Mapping[str, Any]]) -> str:
+    """The report's Exploitability section from ``exploitability.json``."""
+    lines = [
+        "Return under best-response adversaries trained against each frozen protagonist "
+        "within the threat model's budget (the same preset for every protagonist).",
+        "",
+        "| protagonist | preset | nominal | best response | exploitability | steps |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, r in results.items():
+        lines.append(
+            f"| {name} | {r['preset']} | {r['nominal_return']:.4g} | "
+            f"{r['best_response_return']:.4g} | {r['exploitability']:.4g} | "
+            f"{int(r['best_response_steps'])} |"
+        )
+    return "\n".join(lines)

@@ -37,7 +37,13 @@ from advgame.evaluation.columns import (
     describe_column,
     observation_agent,
 )
-from advgame.evaluation.optimal import OPTIMAL, OptimalSearch, optimal_jobs, released_jobs
+from advgame.evaluation.optimal import (
+    OPTIMAL,
+    OptimalSearch,
+    optimal_jobs,
+    released_jobs,
+    write_exploitability,
+)
 from advgame.evaluation.protagonists import check_protagonists, cli_protagonists, run_protagonist
 
 __all__ = [
@@ -149,7 +155,7 @@ def evaluate_policies(
     table = evaluate(jobs, workers=workers, progress=progress, results_dir=out if resume else None)
     table.to_csv(out / "payoff.csv")
     if optimal is not None:
-        _write_exploitability(out, table, threat, optimal.steps)
+        write_exploitability(out, table, threat, optimal.steps)
     if budgets:
         sweep = budget_sweep(scenario, protagonists, budgets, seeds=seed_list, episodes=episodes)
         evaluate(sweep, workers=workers, progress=progress).to_csv(out / "budget.csv")
@@ -297,7 +303,7 @@ def evaluate_runs(
     own = None
     if zoo_adversaries:
         others = bool(runs or checkpoints or callables or teams)
-        own = _zoo_adversaries(released, threat, others, zoo_root)
+        own = zoo_.released_adversaries(released, threat, others, zoo_root)
         threat = threat or next(iter(released.values()))[0].threat
     scenarios = {str(cfg.scenario) for (cfg, _), _ in found.values()}
     scenarios |= {e.scenario for e, _ in released.values()}
@@ -331,52 +337,11 @@ def evaluate_runs(
     )  # fmt: skip
 
 
-def _zoo_adversaries(
-    released: Mapping[str, tuple[Any, Any]],
-    threat: str | None,
-    others: bool,
-    root: str | Path | None,
-) -> dict[str, Any]:
-    """Each zoo agent's released adversary, checked to fit one table (see `evaluate_runs`)."""
-    from advgame import zoo as zoo_
-
-    if not released:
-        raise ConfigError("--zoo-adversaries needs zoo agents (--zoo ID; advgame zoo list).")
-    if others:
-        raise ConfigError(
-            "--zoo-adversaries plays each zoo agent's own adversary: evaluate the zoo agents "
-            "apart from runs, checkpoints and callables."
-        )
-    threats = {e.threat for e, _ in released.values()} | ({threat} if threat else set())
-    if len(threats) > 1:
-        raise ConfigError(
-            f"The zoo agents' adversaries were trained in threat models {sorted(threats)}; "
-            "a table has one (--threat): evaluate them apart."
-        )
-    return {z: zoo_.load(z, root, adversary=True) for z in released}
-
-
-def _write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:
-    """``exploitability.json``: per protagonist, nominal and optimal-attack returns, and the drop."""
-    results = {}
-    for name in table.protagonists:
-        nom, att = table.values(name, NOMINAL), table.values(name, OPTIMAL)
-        if not (nom.size and att.size):
-            continue
-        results[name] = {
-            "preset": threat,
-            "nominal_return": float(nom.mean()),
-            "best_response_return": float(att.mean()),
-            "exploitability": float(nom.mean() - att.mean()),
-            "best_response_steps": float(steps),
-        }
-    (out / "exploitability.json").write_text(json.dumps(results, indent=2) + "\n")
-
-
 def report_folder(folder: Path, scenario: str | None = None) -> Path:
     """(Re)build ``report.md`` and its plots from the files an evaluation wrote in `folder`."""
     from advgame.evaluation.report import (
         adversary_listing,
+        exploitability_md,
         plot_budget_curve,
         plot_training_curves,
         write_report,
@@ -405,7 +370,7 @@ def report_folder(folder: Path, scenario: str | None = None) -> Path:
             json.loads((folder / "columns.json").read_text())
         )
     if (folder / "exploitability.json").exists():
-        sections["Exploitability"] = _exploit_md(
+        sections["Exploitability"] = exploitability_md(
             json.loads((folder / "exploitability.json").read_text())
         )
     title = f"advgame robustness report: {scenario or table.rows[0].get('scenario', '')}".rstrip(
@@ -423,20 +388,3 @@ def _cost_limit(runs: Mapping[str, Mapping[str, Any]]) -> float | None:
     """
     limits = [float(e["cost_limit"]) for e in runs.values() if "cost_limit" in e]
     return min(limits) if limits else None
-
-
-def _exploit_md(results: dict[str, dict[str, Any]]) -> str:
-    lines = [
-        "Return under best-response adversaries trained against each frozen protagonist "
-        "within the threat model's budget (the same preset for every protagonist).",
-        "",
-        "| protagonist | preset | nominal | best response | exploitability | steps |",
-        "|---|---|---|---|---|---|",
-    ]
-    for name, r in results.items():
-        lines.append(
-            f"| {name} | {r['preset']} | {r['nominal_return']:.4g} | "
-            f"{r['best_response_return']:.4g} | {r['exploitability']:.4g} | "
-            f"{int(r['best_response_steps'])} |"
-        )
-    return "\n".join(lines)
