@@ -571,3 +571,20 @@ def test_bad_learner_hyper_parameter_values_raise_config_error() -> None:
 def test_learned_must_name_adversaries_of_the_game(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="force_adversary"):
         train(config("atla", learned=["force_adversary"]), tmp_path / "run", progress=False)
+
+
+def test_the_rollout_size_warning_names_only_sides_that_train(caplog, tmp_path: Path) -> None:
+    """A whole-rollout mismatch is warned for each side that trains; PPO trains no adversary."""
+    import logging
+
+    from advgame.training.loop import Run
+    from advgame.training.trainer import Trainer
+
+    odd = {"n_steps": 48}  # TINY's phases are not whole rollouts of 48 steps
+    for method, sides in (("ppo", {"protagonist"}), ("atla", {"protagonist", "adversary"})):
+        caplog.clear()
+        cfg = config(method, protagonist_hparams=odd, adversary_hparams=odd)
+        with caplog.at_level(logging.WARNING, logger="advgame.training.loop"):
+            Run(Trainer(cfg, tmp_path / method))
+        warned = {s for s in ("protagonist", "adversary") if f"each {s} phase" in caplog.text}
+        assert warned == sides, method
