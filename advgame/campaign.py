@@ -157,6 +157,17 @@ def _progress(run_dir: Path) -> int:
     return int(read_json(run_dir / "state.json", "run state", ("iteration",))["iteration"])
 
 
+class _StatusEach:
+    """Rewrites ``status.json`` each time a run finishes (the executor's progress hook)."""
+
+    def __init__(self, campaign: Campaign, out: Path, training: Sequence[str]) -> None:
+        self.campaign, self.out, self.training = campaign, out, training
+
+    def update(self) -> None:
+        """One more unit finished: record what is on disk now."""
+        write_status(self.campaign, self.out, training=self.training)
+
+
 def _train_unit(unit: tuple[Any, str, str]) -> str:
     """Train or resume one run to its end, then keep it compact in ``finished/`` (a worker)."""
     from advgame.training import resume, train
@@ -259,7 +270,8 @@ def run_campaign(
                 (campaign.config(r), str(out / "runs" / r), str(out / FINISHED / r)) for r in todo
             ]
             run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
-                      address=address, max_retries=1)  # fmt: skip
+                      address=address, max_retries=1,
+                      progress=_StatusEach(campaign, out, todo))  # fmt: skip
     status = write_status(campaign, out)
     if stage == "train":
         return out / "status.json"
