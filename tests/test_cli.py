@@ -213,6 +213,13 @@ def test_quick_demo_trains_evaluates_and_prints_the_report_path(tmp_path: Path, 
     assert main(["demo", "--quick", "--out", str(out), "--workers", "1"]) == 0
     printed = capsys.readouterr().out
     assert f"report: {out / 'report.md'}" in printed
+    from advgame import zoo
+
+    released = [e.id for e in zoo.entries() if e.scenario == "Hopper-v5" and "adversary" in e.files]
+    if released:  # the repository's zoo: each released agent's row, under its own adversary
+        assert f"zoo report: {out / 'zoo' / 'report.md'}" in printed
+        zoo_report = (out / "zoo" / "report.md").read_text()
+        assert all(f"| {r} |" in zoo_report for r in released) and "attack optimal" in zoo_report
     report = (out / "report.md").read_text()
     assert "ppo" in report and "atla" in report
     assert "attack mad" in report and "attack critic" in report  # the worst-of-attacks suite
