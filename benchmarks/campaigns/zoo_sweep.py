@@ -52,7 +52,7 @@ def main() -> None:
     from advgame import zoo
     from advgame.evaluation import evaluate
     from advgame.evaluation.plots import plot_budget_curve
-    from scenarios.mujoco import ATLA_EPS
+    from advgame.scenarios.mujoco import ATLA_EPS
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--scenario", default="Hopper-v5")
