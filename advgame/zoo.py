@@ -19,7 +19,7 @@ import hashlib
 import json
 import os
 import shutil
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -158,32 +158,22 @@ def load(entry_id: str, root: str | Path | None = None, *, adversary: bool = Fal
 
 
 def released_adversaries(
-    released: Mapping[str, tuple[Any, Any]],
-    threat: str | None,
-    others: bool,
-    root: str | Path | None,
+    released: Sequence[ZooEntry], threat: str | None, root: str | Path | None = None
 ) -> dict[str, Any]:
-    """Each zoo agent's released adversary as a spec, checked to fit one table.
+    """``{id: spec}`` of each released agent's adversary, checked to fit one table.
 
-    `released` is ``{id: (entry, protagonist spec)}``; `others` says whether the table has
-    protagonists other than zoo agents (then it is an error: each row plays its own adversary);
-    `threat` is the table's threat model, if given (the agents' must agree with it).
+    `threat` is the table's threat model, if given: every agent's must be the same one.
     See `advgame.evaluation.suite.evaluate_runs` (``zoo_adversaries``).
     """
     if not released:
         raise ConfigError("--zoo-adversaries needs zoo agents (--zoo ID; advgame zoo list).")
-    if others:
-        raise ConfigError(
-            "--zoo-adversaries plays each zoo agent's own adversary: evaluate the zoo agents "
-            "apart from runs, checkpoints and callables."
-        )
-    threats = {e.threat for e, _ in released.values()} | ({threat} if threat else set())
+    threats = {e.threat for e in released} | ({threat} if threat else set())
     if len(threats) > 1:
         raise ConfigError(
             f"The zoo agents' adversaries were trained in threat models {sorted(threats)}; "
             "a table has one (--threat): evaluate them apart."
         )
-    return {z: load(z, root, adversary=True) for z in released}
+    return {e.id: load(e.id, root, adversary=True) for e in released}
 
 
 def release(entry: ZooEntry, sources: dict[str, Path], root: str | Path | None = None) -> ZooEntry:

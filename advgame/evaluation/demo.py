@@ -106,7 +106,7 @@ def demo_zoo(
         zoo=[e.id for e in found],
         zoo_root=root,
         zoo_adversaries=True,
-        adversaries=ZOO_ATTACKS[1:2] if quick else ZOO_ATTACKS,
+        adversaries=("attack:mad",) if quick else ZOO_ATTACKS,
         seeds=1 if quick else 5,
         episodes=1,
         workers=workers,

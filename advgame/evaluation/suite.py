@@ -144,12 +144,12 @@ def evaluate_policies(
     threat = threat or default_threat(scenario)
     if optimal is not None and released is not None:
         raise ConfigError("Search the optimal attack or play released adversaries, not both.")
+    learned_column = optimal is not None or released is not None
+    agent = observation_agent(scenario, threat) if learned_column else ""
     if optimal is not None:
-        agent = observation_agent(scenario, threat)
         jobs += optimal_jobs(scenario, threat, agent, protagonists, optimal, out, seeds=seed_list,
                              episodes=episodes)  # fmt: skip
     if released is not None:
-        agent = observation_agent(scenario, threat)
         jobs += released_jobs(scenario, threat, agent, protagonists, released, seeds=seed_list,
                               episodes=episodes)  # fmt: skip
     table = evaluate(jobs, workers=workers, progress=progress, results_dir=out if resume else None)
@@ -302,9 +302,14 @@ def evaluate_runs(
     released = {z: (zoo_.entry(z, zoo_root), zoo_.load(z, zoo_root)) for z in zoo}
     own = None
     if zoo_adversaries:
-        others = bool(runs or checkpoints or callables or teams)
-        own = zoo_.released_adversaries(released, threat, others, zoo_root)
-        threat = threat or next(iter(released.values()))[0].threat
+        if runs or checkpoints or callables or teams:
+            raise ConfigError(
+                "--zoo-adversaries plays each zoo agent's own adversary: evaluate the zoo agents "
+                "apart from runs, checkpoints and callables."
+            )
+        entries = [e for e, _ in released.values()]
+        own = zoo_.released_adversaries(entries, threat, zoo_root)
+        threat = threat or entries[0].threat
     scenarios = {str(cfg.scenario) for (cfg, _), _ in found.values()}
     scenarios |= {e.scenario for e, _ in released.values()}
     scenarios |= {scenario} if scenario else set()

@@ -95,14 +95,16 @@ def unit_key(unit: Any) -> str:
     in this process vs. one read back from JSON): a resumed run would then miss its finished
     part files and redo them. Without the memo the pickle depends on the values alone.
     """
-    blob = pickled(unit)  # a unit that cannot be pickled is a ConfigError saying what to change
     buf = io.BytesIO()
     pickler = pickle.Pickler(buf, protocol=pickle.HIGHEST_PROTOCOL)
     pickler.fast = True  # no memo: every occurrence of a value is written out in full
     try:
         pickler.dump(unit)
     except ValueError:  # a unit holding a cycle needs the memo
-        return digest(blob)
+        return digest(pickled(unit))
+    except Exception:
+        pickled(unit)  # a unit that cannot be pickled: a ConfigError saying what to change
+        raise
     return digest(buf.getvalue())
 
 

@@ -43,7 +43,7 @@ class Run:
         self.prot_cfg = learner_config(self.cfg.protagonist_algo, self.cfg.protagonist_hparams)
         self.adv_cfg = learner_config(self.cfg.adversary_algo, self.cfg.adversary_hparams)
         _warn_rollouts("protagonist", self.cfg.protagonist_steps, self.prot_cfg, self.cfg.n_envs)
-        if self.cfg.learned is None or self.cfg.learned:  # PPO-style runs train no adversary
+        if self.t.learned:  # PPO-style runs train no adversary
             _warn_rollouts("adversary", self.cfg.adversary_steps, self.adv_cfg, self.cfg.n_envs)
 
     def execute(self, fresh: bool) -> Path:
