@@ -12,7 +12,17 @@ __all__ = ["gaussian_presets", "make_task"]
 
 
 def make_task(env_id: str, **kwargs: object) -> GymTask:
-    """A Gymnasium env as a single-protagonist task base."""
+    """A Gymnasium env as a single-protagonist task base.
+
+    Gymnasium's MuJoCo v5 tasks get `advgame.scenarios.mujoco_batch.BatchedGymTask`, which
+    steps the simulators of alike games moving together as one batch.
+    """
+    from advgame.scenarios.mujoco_formulas import FORMULAS
+
+    if env_id in FORMULAS:
+        from advgame.scenarios.mujoco_batch import BatchedGymTask
+
+        return BatchedGymTask(env_id, **kwargs)
     return GymTask(env_id, **kwargs)  # type: ignore[arg-type]
 
 

@@ -15,9 +15,12 @@ for the batch:
   draw from each game's own generator row by row);
 * each protagonist's ``[N, *shape]`` actions are checked by `moves.protagonist_rows`.
 
-What stays per game is what is per game: the simulator step, environment disruptors (each
-game's own model), rewards, schedules and episode state, through the same `Game` code as a
-single move (`Game._step_task`, `Game._begin_step`). So every game's move, observation,
+What stays per game is what is per game: environment disruptors (each game's own model),
+rewards, schedules and episode state, through the same `Game` code as a single move
+(`Game._after_task`, `Game._begin_step`). The simulator step goes to the task base's
+`TaskBase.step_many`, which steps the games' simulators as one batch where the task base can
+(Gymnasium MuJoCo tasks: `advgame.scenarios.mujoco_batch.BatchedGymTask`, MuJoCo on a pool of
+threads) and game by game otherwise. So every game's move, observation,
 reward and clip count are those of its single `play` (``tests/test_lockstep.py``), and one
 game is simply N = 1.
 
@@ -151,7 +154,8 @@ def _act_all(games: Sequence[Game], actions: Mapping[str, Sequence[Any]]) -> lis
             v = g._effective(peer, use)  # a held perturbation, game by game
             if v is not None:
                 peer.action(act, v, g._rng)
+    results = type(g0.task).step_many([g.task for g in games], acts)
     return [
-        g._step_task(act, use, clip)
-        for g, act, use, clip in zip(games, acts, used, clipped, strict=True)
+        g._after_task(result, use, clip)
+        for g, result, use, clip in zip(games, results, used, clipped, strict=True)
     ]

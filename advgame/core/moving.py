@@ -16,7 +16,7 @@ from gymnasium import spaces
 
 from advgame.core.moves import ACT, SENSE, Move, protagonist_action
 from advgame.core.schedule import Schedule
-from advgame.core.task import TaskBase
+from advgame.core.task import StepResult, TaskBase
 from advgame.disruptors.base import Disruptor
 
 __all__ = ["Moves"]
@@ -129,7 +129,13 @@ class Moves:
         self, acts: dict[str, Any], used: dict[str, np.ndarray], clipped: dict[str, int]
     ) -> Move:
         """The rest of an act move once the (disrupted) protagonist actions are known."""
-        obs, reward, cost, terminated, truncated, info = self.task.step(acts)
+        return self._after_task(self.task.step(acts), used, clipped)
+
+    def _after_task(
+        self, result: StepResult, used: dict[str, np.ndarray], clipped: dict[str, int]
+    ) -> Move:
+        """The rest of an act move once the task has stepped (`result` of ``task.step``)."""
+        obs, reward, cost, terminated, truncated, info = result
         payoff = reward - self.cost_weight * cost
         self.last_reward = reward
         self.episode_reward += reward

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import abc
 import logging
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -177,6 +177,19 @@ class TaskBase(abc.ABC):
     @abc.abstractmethod
     def step(self, actions: Mapping[str, Any]) -> StepResult:
         """Advance one step with each protagonist's (already disrupted) action."""
+
+    @classmethod
+    def step_many(
+        cls, tasks: Sequence[TaskBase], actions: Sequence[Mapping[str, Any]]
+    ) -> list[StepResult]:
+        """``[task.step(acts) for task, acts in zip(tasks, actions)]``: alike games' tasks.
+
+        `advgame.core.lockstep` calls it with the tasks of N alike games (all of this class)
+        moving together; a task base that can step its simulators as one batch overrides it
+        (`advgame.scenarios.mujoco_batch.BatchedGymTask`) and must return what the loop
+        would, bit for bit.
+        """
+        return [t.step(a) for t, a in zip(tasks, actions, strict=True)]
 
     @abc.abstractmethod
     def state(self, observations: Mapping[str, Any]) -> Any:

@@ -168,10 +168,17 @@ def _materialize(unit: Any, files: dict[str, bytes]) -> Any:
 
 # -- what a worker runs ---------------------------------------------------------------------
 def init_worker(path: list[str]) -> None:
-    """Worker initializer: the caller's import path; one thread for torch and BLAS."""
+    """Worker initializer: the caller's import path; one thread for torch, BLAS and MuJoCo.
+
+    A pool already runs one worker per core, so batched simulator steps stay on the worker's
+    thread unless the user set `advgame.core.physics.THREADS_VAR` themselves.
+    """
+    from advgame.core.physics import THREADS_VAR
+
     sys.path[:] = path
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"  # read by torch and BLAS when (and if) a job imports them
+    os.environ.setdefault(THREADS_VAR, "1")
     if "torch" in sys.modules:
         sys.modules["torch"].set_num_threads(1)
 
