@@ -20,6 +20,7 @@ the threat model, the optimal attack's budget)::
     threat = "atla"
     seeds = 10
     exploitability = 0         # steps of the searched optimal attack (0: none)
+    cost_limit = 25            # safe scenarios: add the cost table (episode cost ≤ limit)
 
 `run_campaign` trains every run that is not finished, two (``workers``) at a time as jobs on
 the executor (a local process pool or Ray); a run that was interrupted resumes from its last
@@ -28,7 +29,9 @@ iteration (``runs/``), a finished one is compacted to its last checkpoint and mo
 final protagonist in one table (finished evaluation units are read back, not replayed) and
 writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-attacks
 return, the interquartile range and the 95 % interval over seeds of its natural and
-worst-of-attacks returns. ``status.json`` says at every step what is done.
+worst-of-attacks returns; with a ``cost_limit`` (safe scenarios), per method and column the
+return and episode cost (means over seeds with 95 % intervals) and the share of evaluation
+episodes whose cost stays within the limit. ``status.json`` says at every step what is done.
 """
 
 from __future__ import annotations
@@ -74,6 +77,8 @@ class Campaign:
     """Evaluation seeds per cell."""
     exploitability: int = 0
     """Steps of each candidate of the searched optimal attack (0: no optimal column)."""
+    cost_limit: float | None = None
+    """Episode cost limit of a safe campaign: adds the cost table (None: no cost table)."""
 
     def __post_init__(self) -> None:
         from advgame.training import METHODS
@@ -95,6 +100,11 @@ class Campaign:
             raise ConfigError(
                 f"evaluate.exploitability must be an int >= 0, got {self.exploitability!r}."
             )
+        limit = self.cost_limit
+        if limit is not None and (
+            isinstance(limit, bool) or not isinstance(limit, int | float) or not limit >= 0
+        ):
+            raise ConfigError(f"evaluate.cost_limit must be a number >= 0, got {limit!r}.")
         for name in self.runs():  # every TrainConfig is checked before anything runs
             self.config(name)
 
@@ -134,7 +144,7 @@ def load_campaign(path: str | Path) -> Campaign:
         m: train.pop(m) for m in list(train) if isinstance(train[m], dict) and m in methods
     }
     ev = dict(data.get("evaluate", {}))
-    unknown = set(ev) - {"adversaries", "threat", "seeds", "exploitability"}
+    unknown = set(ev) - {"adversaries", "threat", "seeds", "exploitability", "cost_limit"}
     if unknown:
         raise ConfigError(f"{path}: unknown [evaluate] keys {sorted(unknown)}.")
     return Campaign(
@@ -147,6 +157,7 @@ def load_campaign(path: str | Path) -> Campaign:
         threat=ev.get("threat"),
         eval_seeds=ev.get("seeds", 5),
         exploitability=ev.get("exploitability", 0),
+        cost_limit=ev.get("cost_limit"),
     )
 
 
@@ -351,7 +362,8 @@ def campaign_table(campaign: Campaign, out: Path) -> Path:
     path = out / "results" / "payoff.csv"
     if not path.exists():
         raise FileFormatError(f"{path} is missing; evaluate the campaign first.")
-    metrics = {m["protagonist"]: m for m in PayoffTable.from_csv(path).metrics(nominal=NOMINAL)}
+    table = PayoffTable.from_csv(path)
+    metrics = {m["protagonist"]: m for m in table.metrics(nominal=NOMINAL)}
     rows = []
     for method in campaign.methods:
         agents = [r for r in campaign.runs() if r.rpartition("-s")[0] == method and r in metrics]
@@ -370,8 +382,42 @@ def campaign_table(campaign: Campaign, out: Path) -> Path:
     csv_lines = [",".join(rows[0])] + [",".join(str(v) for v in r.values()) for r in rows]
     (out / "campaign.csv").write_text("\n".join(csv_lines) + "\n")
     md = out / "campaign.md"
-    md.write_text(_table_md(campaign, rows))
+    text = _table_md(campaign, rows)
+    if campaign.cost_limit is not None:
+        text += "\n" + _cost_md(campaign, table.safety(campaign.cost_limit))
+    md.write_text(text)
     return md
+
+
+def _cost_md(campaign: Campaign, cells: list[dict[str, Any]]) -> str:
+    """Per method and column: return and episode cost over seeds, and the satisfaction rate."""
+    from advgame.evaluation import ci95
+
+    lines = [
+        f"## Cost (limit {campaign.cost_limit:g} per episode)",
+        "",
+        "| method | column | seeds | return | ±95 % | episode cost | ±95 % | cost ≤ limit |",
+        "|" + "---|" * 8,
+    ]
+    for method in campaign.methods:
+        mine = [c for c in cells if c["protagonist"].rpartition("-s")[0] == method]
+        for column in dict.fromkeys(c["adversary"] for c in mine):
+            sel = [c for c in mine if c["adversary"] == column]
+            ret = [c["return"] for c in sel]
+            cost = [c["cost"] for c in sel]
+            episodes = sum(c["episodes"] for c in sel)
+            ok = sum(c["satisfied"] * c["episodes"] for c in sel) / episodes
+            cells_ = [method, column, len(sel), float(np.mean(ret)), ci95(ret),
+                      float(np.mean(cost)), ci95(cost), f"{100 * ok:.0f} %"]  # fmt: skip
+            lines.append("| " + " | ".join(_fmt(c) for c in cells_) + " |")
+    lines += [
+        "",
+        "Return and episode cost are the means over the method's agents of each agent's mean "
+        "over its evaluation episodes (true reward, true cost); ±95 % is the Student-t "
+        "half-width over agents; cost ≤ limit is the share of all the method's evaluation "
+        "episodes within the limit.",
+    ]
+    return "\n".join(lines) + "\n"
 
 
 def _iqr(values: np.ndarray) -> str:

@@ -166,3 +166,42 @@ def test_every_released_agent_matches_its_manifest_and_plays() -> None:
         [result] = rollout(game, {"protagonist": spec}, seed=0)
         assert result.length >= 1
         game.close()
+
+
+SAFE = """
+scenario = "SafetyHopper-v5"
+methods = ["ppo", "ppo-lag"]
+seeds = [0]
+
+[train]
+iterations = 1
+protagonist_steps = 128
+eval_episodes = 0
+protagonist_hparams = { n_steps = 64 }
+
+[evaluate]
+adversaries = ["nominal"]
+seeds = 2
+cost_limit = 25
+"""
+
+
+def test_a_safe_campaign_tables_return_cost_and_satisfaction_per_method(tmp_path: Path) -> None:
+    import csv
+
+    spec = tmp_path / "safe.toml"
+    spec.write_text(SAFE)
+    assert main(["campaign", str(spec), "--workers", "1", "--no-progress"]) == 0
+    out = tmp_path / "safe"
+    rows = list(csv.DictReader((out / "results" / "payoff.csv").open()))
+    table = (out / "campaign.md").read_text()
+    assert "## Cost (limit 25 per episode)" in table
+    for method in ("ppo", "ppo-lag"):
+        costs = [float(r["cost"]) for r in rows if r["protagonist"] == f"{method}-s0"]
+        share = 100 * sum(c <= 25 for c in costs) / len(costs)
+        line = next(ln for ln in table.splitlines() if ln.startswith(f"| {method} | nominal |"))
+        assert line.endswith(f"| {share:.0f} % |")
+        assert f"| {sum(costs) / len(costs):.4g} |" in line
+    spec.write_text(SAFE.replace("cost_limit = 25", "cost_limit = -1"))
+    with pytest.raises(ConfigError, match="cost_limit"):
+        load_campaign(spec)
