@@ -53,8 +53,9 @@ class ThreadedStepper:
     """Advance MuJoCo simulations `nstep` substeps each, split over `threads` threads.
 
     Args:
-        threads: simulator threads (``None``: `default_threads`). With 1 the envs are stepped
-            on the calling thread.
+        threads: simulator threads (``None``: `default_threads`), the calling thread included:
+            it steps the first share of the envs while ``threads - 1`` pool threads step the
+            rest. With 1 every env is stepped on the calling thread.
 
     Example:
         >>> import gymnasium as gym, numpy as np
@@ -101,12 +102,15 @@ class ThreadedStepper:
             return
         if self._pool is None or self._pid != os.getpid():  # a forked child has no threads
             self._pid = os.getpid()
-            self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="advgame-physics")
-        bounds = np.linspace(0, n, parts + 1).astype(int)
+            self._pool = ThreadPoolExecutor(
+                self.threads - 1, thread_name_prefix="advgame-physics"
+            )
+        bounds = [int(b) for b in np.linspace(0, n, parts + 1)]
         futures = [
-            self._pool.submit(self._run, owners, ctrl, nstep, post_constraint, int(lo), int(hi))
-            for lo, hi in itertools.pairwise(bounds)
+            self._pool.submit(self._run, owners, ctrl, nstep, post_constraint, lo, hi)
+            for lo, hi in itertools.pairwise(bounds[1:])
         ]
+        self._run(owners, ctrl, nstep, post_constraint, 0, bounds[1])  # the caller's share
         for future in futures:
             future.result()
 
