@@ -102,9 +102,7 @@ class ThreadedStepper:
             return
         if self._pool is None or self._pid != os.getpid():  # a forked child has no threads
             self._pid = os.getpid()
-            self._pool = ThreadPoolExecutor(
-                self.threads - 1, thread_name_prefix="advgame-physics"
-            )
+            self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="advgame-physics")
         bounds = [int(b) for b in np.linspace(0, n, parts + 1)]
         futures = [
             self._pool.submit(self._run, owners, ctrl, nstep, post_constraint, lo, hi)
