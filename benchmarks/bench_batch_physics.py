@@ -6,6 +6,9 @@ random actions (drawn before timing), for N in ``--n`` (default 8, 16, 64):
 * ``sync``: Gymnasium's ``SyncVectorEnv`` of N ``gymnasium.make(env)`` (the reference: 1.00).
 * ``batch-tK``: `advgame.scenarios.mujoco_batch.BatchedMujocoEnv` with K simulator threads:
   the same envs bit for bit, observations/rewards/infos computed over ``[N, ...]``.
+* ``stepper-tK``: the batched env's physics alone (`advgame.core.physics.ThreadedStepper`:
+  controls set, ``mj_step`` on K threads; no observations, rewards or infos), so that
+  ``batch-tK`` minus it is the NumPy side's cost.
 * ``envpool-tK``: EnvPool's own ``<env>`` with K threads (``pip install envpool``; skipped when
   absent). A reference only: its own MuJoCo build, no adversaries, no model edits.
 * ``rollout-tK``: ``mujoco.rollout`` of the N states, one call per move with ``frame_skip``
@@ -32,6 +35,7 @@ import gymnasium as gym
 import numpy as np
 from _common import quartiles
 
+from advgame.core.physics import ThreadedStepper
 from advgame.scenarios.mujoco_batch import BatchedMujocoEnv
 
 
@@ -72,12 +76,31 @@ class _Rollout:
         self.runner.close()
 
 
+class _Stepper:
+    """The exact physics alone: `ThreadedStepper` over N unwrapped envs, nothing computed after."""
+
+    def __init__(self, env_id: str, n: int, threads: int) -> None:
+        self.envs = [gym.make(env_id).unwrapped for _ in range(n)]
+        for i, env in enumerate(self.envs):
+            env.reset(seed=i)
+        self.stepper = ThreadedStepper(threads)
+        self.frame_skip = self.envs[0].frame_skip
+
+    def step(self, actions: np.ndarray) -> None:
+        self.stepper.step(self.envs, actions, self.frame_skip, post_constraint=False)
+
+    def close(self) -> None:
+        self.stepper.close()
+
+
 def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[], Any]]:
     out: dict[str, Callable[[], Any]] = {
         "sync": lambda: gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n)
     }
     for k in threads:
         out[f"batch-t{k}"] = lambda k=k: BatchedMujocoEnv(env_id, n, threads=k)
+    for k in threads:
+        out[f"stepper-t{k}"] = lambda k=k: _Stepper(env_id, n, k)
     try:
         import envpool
 
