@@ -6,9 +6,15 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from advgame.core.physics import THREADS_VAR, default_threads, shared_stepper
+from advgame.core.physics import THREADS_VAR, ThreadedStepper, default_threads, shared_stepper
 from advgame.errors import ConfigError, UnknownNameError
 from advgame.scenarios.mujoco_batch import TASKS, BatchedMujocoEnv
+
+
+@pytest.fixture(autouse=True)
+def _threads_whatever_the_batch_costs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Split even small batches over the threads, so that the threaded path is what is tested."""
+    monkeypatch.setattr(ThreadedStepper, "MIN_BATCH_SECONDS", 0.0)
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
@@ -189,3 +195,25 @@ def test_tasks_made_with_other_keywords_step_one_by_one() -> None:
     fresh.reset(seed=0)
     assert got[1][1] == fresh.step(act)[1]
     assert got[0][1] != got[1][1]
+
+
+def test_a_batch_too_cheap_to_share_stays_on_the_calling_thread(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    envs = [gym.make("Hopper-v5").unwrapped for _ in range(4)]
+    for i, env in enumerate(envs):
+        env.reset(seed=i)
+    twins = [gym.make("Hopper-v5").unwrapped for _ in range(4)]
+    for i, env in enumerate(twins):
+        env.reset(seed=i)
+    monkeypatch.setattr(ThreadedStepper, "MIN_BATCH_SECONDS", 1e9)
+    alone, shared = ThreadedStepper(2), ThreadedStepper(2)
+    for _ in range(3):
+        alone.step(envs, np.full((4, 3), 0.3), nstep=4)
+    assert alone._pool is None  # measured once, then judged not worth a second thread
+    monkeypatch.setattr(ThreadedStepper, "MIN_BATCH_SECONDS", 0.0)
+    for _ in range(3):
+        shared.step(twins, np.full((4, 3), 0.3), nstep=4)
+    assert shared._pool is not None
+    assert all(np.array_equal(a.data.qpos, b.data.qpos) for a, b in zip(envs, twins, strict=True))
+    shared.close()

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -52,6 +53,10 @@ def default_threads() -> int:
 class ThreadedStepper:
     """Advance MuJoCo simulations `nstep` substeps each, split over `threads` threads.
 
+    A batch is split over the threads only when it is worth it: each kind of model's cost per
+    env step is measured on the calling thread first, and a step whose envs would take less
+    than `MIN_BATCH_SECONDS` on one thread stays there.
+
     Args:
         threads: simulator threads (``None``: `default_threads`), the calling thread included:
             it steps the first share of the envs while ``threads - 1`` pool threads step the
@@ -66,15 +71,24 @@ class ThreadedStepper:
 
     """
 
+    MIN_BATCH_SECONDS = 300e-6
+    """A step uses more than one thread only when its envs would take at least this long on one.
+
+    Handing work to a second thread and collecting it costs about 100 µs per step on the 2-core
+    VM this was measured on (`benchmarks/bench_batch_physics.py`: two threads lose to one at
+    8 HalfCheetah copies, about 200 µs of simulation, and win at 8 Hopper copies, about 400).
+    """
+
     def __init__(self, threads: int | None = None) -> None:
         if threads is None:
             threads = default_threads()
         if not isinstance(threads, int) or isinstance(threads, bool) or threads < 1:
             raise ConfigError(f"threads must be a positive integer; got {threads!r}.")
         self.threads = threads
-        """The most threads a step uses (a step of fewer envs uses fewer)."""
+        """The most threads a step uses (a step of fewer envs, or of cheap ones, uses fewer)."""
         self._pool: ThreadPoolExecutor | None = None
         self._pid = os.getpid()
+        self._cost: dict[tuple[int, ...], float] = {}  # seconds per env step, on one thread
 
     def step(
         self,
@@ -97,6 +111,16 @@ class ThreadedStepper:
         """
         n = len(owners)
         parts = min(self.threads, n)
+        if parts >= 2:
+            model = owners[0].model
+            key = (model.nq, model.nv, model.nbody, model.ngeom, model.nu, nstep)
+            cost = self._cost.get(key)
+            if cost is None or cost * n < self.MIN_BATCH_SECONDS:
+                start = time.perf_counter()
+                self._run(owners, ctrl, nstep, post_constraint, 0, n)
+                seen = (time.perf_counter() - start) / n
+                self._cost[key] = seen if cost is None else 0.9 * cost + 0.1 * seen
+                return
         if parts < 2:
             self._run(owners, ctrl, nstep, post_constraint, 0, n)
             return
