@@ -9,6 +9,9 @@ random actions (drawn before timing), for N in ``--n`` (default 8, 16, 64):
 * ``stepper-tK``: the batched env's physics alone (`advgame.core.physics.ThreadedStepper`:
   controls set, ``mj_step`` on K threads; no observations, rewards or infos), so that
   ``batch-tK`` minus it is the NumPy side's cost.
+* ``game-tK``: `advgame.core.vector.VectorView` of N protagonist views of preset ``default``
+  with `RandomAdversary` observation and action adversaries (three agents, two moves per
+  step, budgets checked), K simulator threads (``ADVGAME_PHYSICS_THREADS``): the batched game.
 * ``envpool-tK``: EnvPool's own ``<env>`` with K threads (``pip install envpool``; skipped when
   absent). A reference only: its own MuJoCo build, no adversaries, no model edits.
 * ``rollout-tK``: ``mujoco.rollout`` of the N states, one call per move with ``frame_skip``
@@ -26,6 +29,7 @@ Run: ``python benchmarks/bench_batch_physics.py`` (``--env``, ``--n``, ``--threa
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 from collections.abc import Callable
@@ -35,7 +39,7 @@ import gymnasium as gym
 import numpy as np
 from _common import quartiles
 
-from advgame.core.physics import ThreadedStepper
+from advgame.core.physics import THREADS_VAR, ThreadedStepper
 from advgame.scenarios.mujoco_batch import BatchedMujocoEnv
 
 
@@ -93,6 +97,32 @@ class _Stepper:
         self.stepper.close()
 
 
+class _Game:
+    """The batched game: a `VectorView` of protagonist views with random adversaries."""
+
+    def __init__(self, env_id: str, n: int, threads: int) -> None:
+        from advgame.adversaries import RandomAdversary
+        from advgame.core.vector import VectorView
+        from advgame.core.views import view_factory
+
+        policies = {a: RandomAdversary() for a in ("observation_adversary", "action_adversary")}
+        self.threads = str(threads)
+        self.venv = VectorView(
+            [view_factory(env_id, "protagonist", policies, preset="default")] * n
+        )
+        self.venv.seed(0)
+
+    def reset(self, seed: int) -> None:
+        self.venv.reset()
+
+    def step(self, actions: np.ndarray) -> None:
+        os.environ[THREADS_VAR] = self.threads  # the simulator threads of this variant
+        self.venv.step(actions)
+
+    def close(self) -> None:
+        self.venv.close()
+
+
 def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[], Any]]:
     out: dict[str, Callable[[], Any]] = {
         "sync": lambda: gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n)
@@ -101,6 +131,8 @@ def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[],
         out[f"batch-t{k}"] = lambda k=k: BatchedMujocoEnv(env_id, n, threads=k)
     for k in threads:
         out[f"stepper-t{k}"] = lambda k=k: _Stepper(env_id, n, k)
+    for k in threads:
+        out[f"game-t{k}"] = lambda k=k: _Game(env_id, n, k)
     try:
         import envpool
 

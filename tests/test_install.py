@@ -24,7 +24,7 @@ ROOT = Path(advgame.__file__).resolve().parents[1]
 LOCK = ROOT / "constraints.txt"
 CORE = {"gymnasium", "pettingzoo", "mujoco", "torch", "stable-baselines3", "numpy"}
 CORE |= {"matplotlib", "tqdm", "tensorboard"}
-EXTRAS = {"box2d", "mamujoco", "robotics", "robosuite", "llm", "ray", "test", "all"}
+EXTRAS = {"box2d", "mamujoco", "robotics", "robosuite", "llm", "ray", "test", "all", "bench"}
 
 
 def _lock() -> dict[str, Version]:
