@@ -409,7 +409,7 @@ def _cost_md(campaign: Campaign, cells: list[dict[str, Any]]) -> str:
             ok = sum(c["satisfied"] * c["episodes"] for c in sel) / episodes
             cells_ = [method, column, len(sel), float(np.mean(ret)), ci95(ret),
                       float(np.mean(cost)), ci95(cost), f"{100 * ok:.0f} %"]  # fmt: skip
-            lines.append("| " + " | ".join(_fmt(c) for c in cells_) + " |")
+            lines.append(_row(cells_))
     lines += [
         "",
         "Return and episode cost are the means over the method's agents of each agent's mean "
@@ -433,13 +433,18 @@ def _fmt(v: Any) -> str:
     )
 
 
+def _row(cells: list[Any]) -> str:
+    """One Markdown table row of `cells`, numbers to four significant digits."""
+    return "| " + " | ".join(_fmt(c) for c in cells) + " |"
+
+
 def _table_md(campaign: Campaign, rows: list[dict[str, Any]]) -> str:
     head = "| method | seeds | median agent | natural | IQR | ±95 % | worst attack | worst | IQR | ±95 % |"
     lines = [f"# Campaign: {campaign.scenario}", "", head, "|" + "---|" * 10]
     for r in rows:
         cells = [r["method"], r["seeds"], r["median_agent"], r["natural"], r["natural_iqr"],
                  r["natural_ci95"], r["worst_attack"], r["worst"], r["worst_iqr"], r["worst_ci95"]]  # fmt: skip
-        lines.append("| " + " | ".join(_fmt(c) for c in cells) + " |")
+        lines.append(_row(cells))
     lines += [
         "",
         "The median agent of a method is its run with the median worst-of-attacks return (the "
