@@ -99,7 +99,7 @@ CORE_FILES = frozenset(
         "evaluation", "batched_eval", "evaluate_any", "threat_model", "policy_wrappers",
         "whitebox", "sb3", "training", "cli", "not_applicable", "robust_sarsa", "attack_batch",
         "fuzz_config", "fuzz_train_eval", "corrupt_files", "sa_ppo", "pgd_at",
-        "train_config_game",
+        "train_config_game", "mujoco_batch",
     )
 )  # fmt: skip
 """The modules of the core subset (marker ``core``): the game, its views and vector paths,
