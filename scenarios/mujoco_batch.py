@@ -61,12 +61,11 @@ def step_envs(
         observations, rewards and terminations over the rows, and the info arrays.
 
     """
-    rows = range(len(envs))
     env = envs[0]
-    before = formula.before(Stacked(envs, rows), env)
+    before = formula.before(Stacked(envs), env)
     dt = np.array([e.dt for e in envs])
     stepper.step(envs, actions, env.frame_skip, formula.contact_forces)
-    return formula.after(Stacked(envs, rows), env, before, actions, dt)
+    return formula.after(Stacked(envs), env, before, actions, dt)
 
 
 class BatchedMujocoEnv(VectorEnv):
@@ -285,25 +284,12 @@ class BatchedGymTask(GymTask):
         kinds = {(a.dtype, a.shape) for a in arrays}
         if not same or len(kinds) != 1 or arrays[0].shape != (t0._inner.model.nu,):
             # step one by one (a wrong shape then raises the single env's own error)
-            return [t.step(a) for t, a in zip(tasks, actions, strict=True)]
+            return super().step_many(tasks, actions)
         envs = [t._inner for t in tasks]
         obs, reward, terminated, info = step_envs(
             envs, FORMULAS[t0.env_id], np.stack(arrays), shared_stepper()
         )
-        out: list[StepResult] = []
-        for i, t in enumerate(tasks):
-            t._steps += 1
-            truncated = t.max_episode_steps is not None and t._steps >= t.max_episode_steps
-            row_info = {k: v[i] for k, v in info.items()}
-            cost = float(row_info.get(t.cost_key, 0.0)) if t.cost_key else 0.0
-            out.append(
-                (
-                    {cls.AGENT: obs[i]},
-                    float(reward[i]),
-                    cost,
-                    bool(terminated[i]),
-                    truncated,
-                    row_info,
-                )
-            )
-        return out
+        return [
+            t._result(obs[i], reward[i], terminated[i], False, {k: v[i] for k, v in info.items()})
+            for i, t in enumerate(tasks)
+        ]

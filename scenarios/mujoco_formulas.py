@@ -30,25 +30,23 @@ class Stacked:
     """The named `MjData` fields of some envs stacked on a first axis, read on first use.
 
     Args:
-        envs: all envs of the batch (objects with a live ``data``).
-        rows: the envs to read, in order.
+        envs: the envs to read (objects with a live ``data``), in row order.
 
     """
 
-    def __init__(self, envs: Sequence[Any], rows: Sequence[int]) -> None:
+    def __init__(self, envs: Sequence[Any]) -> None:
         self._envs = envs
-        self._rows = list(rows)
 
     def __getattr__(self, field: str) -> np.ndarray:
         if field.startswith("_"):
             raise AttributeError(field)
-        value = np.stack([getattr(self._envs[i].data, field) for i in self._rows])
+        value = np.stack([getattr(env.data, field) for env in self._envs])
         setattr(self, field, value)  # later reads hit the instance attribute
         return value
 
     def each(self, fn: Callable[[Any], Any]) -> np.ndarray:
         """``fn(env)`` for every env in order, as an array."""
-        return np.array([fn(self._envs[i]) for i in self._rows])
+        return np.array([fn(env) for env in self._envs])
 
 
 def _norms(vectors: np.ndarray) -> np.ndarray:

@@ -111,18 +111,17 @@ class ThreadedStepper:
         """
         n = len(owners)
         parts = min(self.threads, n)
-        if parts >= 2:
-            model = owners[0].model
-            key = (model.nq, model.nv, model.nbody, model.ngeom, model.nu, nstep)
-            cost = self._cost.get(key)
-            if cost is None or cost * n < self.MIN_BATCH_SECONDS:
-                start = time.perf_counter()
-                self._run(owners, ctrl, nstep, post_constraint, 0, n)
-                seen = (time.perf_counter() - start) / n
-                self._cost[key] = seen if cost is None else 0.9 * cost + 0.1 * seen
-                return
         if parts < 2:
             self._run(owners, ctrl, nstep, post_constraint, 0, n)
+            return
+        model = owners[0].model
+        key = (model.nq, model.nv, model.nbody, model.ngeom, model.nu, nstep)
+        cost = self._cost.get(key)
+        if cost is None or cost * n < self.MIN_BATCH_SECONDS:  # measure, on this thread
+            start = time.perf_counter()
+            self._run(owners, ctrl, nstep, post_constraint, 0, n)
+            seen = (time.perf_counter() - start) / n
+            self._cost[key] = seen if cost is None else 0.9 * cost + 0.1 * seen
             return
         if self._pool is None or self._pid != os.getpid():  # a forked child has no threads
             self._pid = os.getpid()

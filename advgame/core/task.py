@@ -271,7 +271,12 @@ class GymTask(TaskBase):
         The game enforces call order and the time limit itself, so the unwrapped env is stepped
         directly (skipping the `TimeLimit`/`OrderEnforcing` wrappers' per-step overhead).
         """
-        obs, reward, terminated, truncated, info = self._inner.step(actions[self.AGENT])
+        return self._result(*self._inner.step(actions[self.AGENT]))
+
+    def _result(
+        self, obs: Any, reward: Any, terminated: Any, truncated: Any, info: dict[str, Any]
+    ) -> StepResult:
+        """The task's result of one env step: the time limit counted, the cost read from info."""
         self._steps += 1
         if self.max_episode_steps is not None and self._steps >= self.max_episode_steps:
             truncated = True
