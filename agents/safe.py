@@ -12,9 +12,14 @@ mean observed cost of the episodes finished in the last rollout. Limits are epis
   λ·(J_c - limit))``; the actor follows ``(L_r + λ·L_c) / (1 + λ)``.
 * **CRPO** (Xu et al., 2021): the actor follows the cost surrogate alone when
   ``J_c > limit + slack``, else the reward surrogate.
-* **PCRPO** (Gu et al., 2024; the paper's slack 5e-3 and gradient weights 0.4/0.6): cost alone
+* **PCRPO** (Gu et al., 2024; the paper's slack and gradient weights 0.4/0.6): cost alone
   above ``limit + slack``, reward alone below ``limit - slack``; inside the band the reward and
   cost gradients, projected onto each other's normal plane when they conflict, weighted 0.4/0.6.
+
+Limits and slacks are *episode* costs. The paper states its limit (0.04) and slack (5e-3) on the
+mean cost per step; over a 1,000-step episode its slack is 5, the default here. (A slack of
+5e-3 episode-cost units is a band no estimate ever falls into: CRPO and PCRPO then make the
+same updates, measured on SafetyHopper-v5.)
 
 ``L_r``/``L_c`` are PPO's clipped surrogates of the reward and the cost-reducing advantages;
 the mixed objectives weight the two clipped surrogates (not one surrogate of mixed advantages).
@@ -123,8 +128,9 @@ class CRPOConfig(SafePPOConfig):
     """CRPO: switch to the cost objective while the episode cost exceeds limit + slack."""
 
     algo: ClassVar[str] = "crpo"
-    slack: float = 5e-3
-    """Tolerance above the limit before the cost objective takes over (episode-cost units)."""
+    slack: float = 5.0
+    """Tolerance above the limit before the cost objective takes over (episode cost; the
+    paper's 5e-3 per step over 1,000 steps)."""
 
     def _nonnegative(self) -> tuple[tuple[str, float], ...]:
         return (("cost_limit", 0.0), ("slack", 0.0))
@@ -140,8 +146,9 @@ class PCRPOConfig(SafePPOConfig):
     """PCRPO: soft switching with projected reward and cost gradients inside the slack band."""
 
     algo: ClassVar[str] = "pcrpo"
-    slack: float = 5e-3
-    """Half-width of the band around the limit where both objectives are followed."""
+    slack: float = 5.0
+    """Half-width of the band around the limit where both objectives are followed (episode
+    cost; the paper's 5e-3 per step over 1,000 steps)."""
     reward_weight: float = 0.4
     """Weight of the (projected) reward gradient in the band (paper: gradient wr 0.4)."""
     cost_weight: float = 0.6
