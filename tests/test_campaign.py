@@ -80,6 +80,7 @@ def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(
     lines = (out / "campaign.csv").read_text().splitlines()
     assert lines[0].startswith("method,seeds,median_agent,natural,worst")
     assert len(lines) == 3
+    assert "![training curves](curves.png)" in table and (out / "curves.png").stat().st_size
     # Once more (same workers, so the same units): nothing is trained or played again.
     parts = {p: p.stat().st_mtime_ns for p in (out / "results" / "parts").iterdir()}
     runs = _stamps(out, list(status["runs"]))
@@ -107,6 +108,8 @@ def test_the_zoo_campaign_files_load() -> None:
     for path in sorted((Path(__file__).parent.parent / "zoo").glob("*.toml")):
         campaign = load_campaign(path)
         assert campaign.runs()
+        split = [r for m in campaign.methods for r in campaign.method_runs(m)]
+        assert split == campaign.runs()  # each run in exactly its method's ("atla" ≠ "atla-sa")
 
 
 def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
@@ -196,6 +199,7 @@ def test_a_safe_campaign_tables_return_cost_and_satisfaction_per_method(tmp_path
     rows = list(csv.DictReader((out / "results" / "payoff.csv").open()))
     table = (out / "campaign.md").read_text()
     assert "## Cost (limit 25 per episode)" in table
+    assert "![training curves](curves.png)" in table and (out / "curves.png").stat().st_size
     for method in ("ppo", "ppo-lag"):
         costs = [float(r["cost"]) for r in rows if r["protagonist"] == f"{method}-s0"]
         share = 100 * sum(c <= 25 for c in costs) / len(costs)

@@ -20,7 +20,14 @@ from advgame.core.files import read_csv
 from advgame.errors import ConfigError
 from advgame.evaluation.payoff import PayoffTable, ci95
 
-__all__ = ["X_COLUMNS", "plot_budget_curve", "plot_heatmap", "plot_safety", "plot_training_curves"]
+__all__ = [
+    "X_COLUMNS",
+    "plot_budget_curve",
+    "plot_heatmap",
+    "plot_method_curves",
+    "plot_safety",
+    "plot_training_curves",
+]
 
 log = logging.getLogger(__name__)
 
@@ -178,6 +185,49 @@ def plot_training_curves(
                 ax.plot(xs, cols[col], marker=".", label=name)
                 ax.set_xlabel(xcol or "row")
         ax.set_ylabel(col)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small")
+    return _save(fig, path)
+
+
+def plot_method_curves(
+    groups: Mapping[str, Sequence[str | Path]],
+    path: str | Path,
+    columns: Sequence[str],
+    x: str = "protagonist_steps",
+    lines: Mapping[str, float] | None = None,
+) -> Path | None:
+    """Draw each group's (method's) mean training curve over its runs, with their min-max band.
+
+    `groups` maps a label to the progress CSVs of its runs (seeds); one panel per column of
+    `columns`; runs are cut to the shortest one's rows (x read from the first). `lines` draws a dashed
+    horizontal line on a column's panel (a cost limit). Runs without the columns are skipped;
+    returns None (and writes nothing) if nothing is left.
+    """
+    data: dict[str, dict[str, np.ndarray]] = {}
+    for label, paths in groups.items():
+        runs = [_read_progress(p) for p in paths if Path(p).is_file()]
+        runs = [r for r in runs if x in r and all(c in r for c in columns)]
+        if not runs:
+            log.warning("no progress CSV of %r has %s; skipped", label, [x, *columns])
+            continue
+        n = min(len(r[x]) for r in runs)
+        data[label] = {c: np.stack([r[c][:n] for r in runs]) for c in (x, *columns)}
+    if not data:
+        return None
+    plt = _pyplot()
+    fig, axes = plt.subplots(
+        len(columns), 1, figsize=(6.5, 2.8 * len(columns)), squeeze=False, layout="constrained"
+    )
+    for ax, col in zip(axes[:, 0], columns, strict=True):
+        for label, d in data.items():
+            xs, ys = d[x][0], d[col]
+            (line,) = ax.plot(xs, np.nanmean(ys, axis=0), label=f"{label} ({len(ys)})")
+            ax.fill_between(xs, np.nanmin(ys, axis=0), np.nanmax(ys, axis=0),
+                            color=line.get_color(), alpha=0.2)  # fmt: skip
+        if lines and col in lines:
+            ax.axhline(lines[col], color="k", linestyle="--", linewidth=1, label="limit")
+        ax.set(xlabel=x, ylabel=col)
         ax.grid(alpha=0.3)
         ax.legend(fontsize="small")
     return _save(fig, path)
