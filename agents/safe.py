@@ -10,6 +10,10 @@ mean observed cost of the episodes finished in the last rollout. Limits are epis
 * **PPO-Lagrangian** (OmniSafe's defaults: cost limit 25, multiplier init 0.001, multiplier
   learning rate 0.035 with Adam): before each update ``λ ← max(0, λ + Adam step on
   λ·(J_c - limit))``; the actor follows ``(L_r + λ·L_c) / (1 + λ)``.
+* **PID-Lagrangian** (Stooke, Achiam & Abbeel, 2020; OmniSafe's CPPO-PID defaults: kp 0.1,
+  ki 0.01, kd 0.01, EMAs 0.95, derivative delay 10, λ ≤ 100): λ from a PID controller on
+  ``J_c - limit`` instead of gradient ascent, so it falls as soon as the cost is under the limit
+  (the proportional term) instead of after the integral has unwound; the actor as PPO-Lag's.
 * **CRPO** (Xu et al., 2021): the actor follows the cost surrogate alone when
   ``J_c > limit + slack``, else the reward surrogate.
 * **PCRPO** (Gu et al., 2024; the paper's slack and gradient weights 0.4/0.6): cost alone
@@ -49,7 +53,14 @@ from advgame.agents.safe_ppo import Direction, SafeCollector, SafeModel, safe_up
 from advgame.errors import ConfigError
 from advgame.training.learning import EpisodeStats
 
-__all__ = ["SAFE_LEARNERS", "CRPOConfig", "PCRPOConfig", "PPOLagConfig", "SafeLearner"]
+__all__ = [
+    "SAFE_LEARNERS",
+    "CRPOConfig",
+    "PCRPOConfig",
+    "PIDLagConfig",
+    "PPOLagConfig",
+    "SafeLearner",
+]
 
 _SAFE_STATE = "advgame-safe-learner-v1"
 
@@ -93,6 +104,10 @@ class SafePPOConfig(TeamPPOConfig):
         """How to combine the objectives given the estimated episode cost (subclasses)."""
         raise NotImplementedError
 
+    def initial_state(self) -> dict[str, Any]:
+        """The algorithm's own state before the first update (λ and its controller; none)."""
+        return {}
+
     def learner_class(self) -> type[SafeLearner]:
         """The constrained learner (a `TeamLearner` with a cost critic)."""
         return SafeLearner
@@ -111,6 +126,14 @@ class PPOLagConfig(SafePPOConfig):
     def _nonnegative(self) -> tuple[tuple[str, float], ...]:
         return (("cost_limit", 0.0), ("multiplier_init", 0.0), ("multiplier_lr", 0.0))
 
+    def initial_state(self) -> dict[str, Any]:
+        """λ (a tensor) and its Adam optimizer."""
+        lam = torch.tensor(float(self.multiplier_init), requires_grad=True)
+        return {
+            "multiplier": lam,
+            "multiplier_optimizer": torch.optim.Adam([lam], lr=self.multiplier_lr),
+        }
+
     def direction(self, episode_cost: float, state: dict[str, Any]) -> Direction:
         """Step λ on ``J_c - limit`` (Adam, clamped at 0); weights 1/(1+λ), λ/(1+λ)."""
         lam, opt = state["multiplier"], state["multiplier_optimizer"]
@@ -121,6 +144,61 @@ class PPOLagConfig(SafePPOConfig):
             lam.clamp_(min=0.0)
         value = float(lam.detach())
         return Direction(1.0 / (1.0 + value), value / (1.0 + value))
+
+
+@dataclass(frozen=True)
+class PIDLagConfig(SafePPOConfig):
+    """PID-Lagrangian (CPPO-PID) with OmniSafe's defaults."""
+
+    algo: ClassVar[str] = "ppo-pid"
+    kp: float = 0.1
+    """Proportional gain, on the EMA of ``J_c - limit``."""
+    ki: float = 0.01
+    """Integral gain (the integral starts at `multiplier_init` and stays >= 0)."""
+    kd: float = 0.01
+    """Derivative gain, on the rise of the cost EMA over `d_delay` updates."""
+    d_delay: int = 10
+    """Updates back that the derivative compares with."""
+    p_ema: float = 0.95
+    """EMA factor of the proportional error."""
+    d_ema: float = 0.95
+    """EMA factor of the cost the derivative reads."""
+    multiplier_init: float = 0.001
+    """Initial integral (and λ)."""
+    multiplier_max: float = 100.0
+    """Largest λ."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if type(self.d_delay) is not int or self.d_delay < 1:
+            raise ConfigError(f"PIDLagConfig.d_delay must be an int >= 1, got {self.d_delay!r}.")
+        for name in ("p_ema", "d_ema"):
+            if not 0 <= getattr(self, name) < 1:
+                raise ConfigError(
+                    f"PIDLagConfig.{name} must be in [0, 1), got {getattr(self, name)!r}."
+                )
+
+    def _nonnegative(self) -> tuple[tuple[str, float], ...]:
+        return (("cost_limit", 0.0), ("kp", 0.0), ("ki", 0.0), ("kd", 0.0),
+                ("multiplier_init", 0.0), ("multiplier_max", 0.0))  # fmt: skip
+
+    def initial_state(self) -> dict[str, Any]:
+        """The integral, the two EMAs, the cost EMAs of the last `d_delay` updates, and λ."""
+        return {"integral": float(self.multiplier_init), "p": 0.0, "cost": 0.0,
+                "history": [0.0], "multiplier": float(self.multiplier_init)}  # fmt: skip
+
+    def direction(self, episode_cost: float, state: dict[str, Any]) -> Direction:
+        """λ = clip(kp·EMA(δ) + Σ ki·δ (>= 0) + kd·max(0, rise of EMA(J_c)), 0, max); δ = J_c - limit."""
+        delta = episode_cost - self.cost_limit
+        state["integral"] = max(0.0, state["integral"] + self.ki * delta)
+        state["p"] = self.p_ema * state["p"] + (1 - self.p_ema) * delta
+        state["cost"] = self.d_ema * state["cost"] + (1 - self.d_ema) * episode_cost
+        rise = max(0.0, state["cost"] - state["history"][0])
+        raw = self.kp * state["p"] + state["integral"] + self.kd * rise
+        lam = min(max(0.0, raw), self.multiplier_max)
+        state["history"] = [*state["history"], state["cost"]][-self.d_delay :]
+        state["multiplier"] = lam
+        return Direction(1.0 / (1.0 + lam), lam / (1.0 + lam))
 
 
 @dataclass(frozen=True)
@@ -168,6 +246,7 @@ class PCRPOConfig(SafePPOConfig):
 
 SAFE_LEARNERS: dict[str, type[SafePPOConfig]] = {
     "ppo-lag": PPOLagConfig,
+    "ppo-pid": PIDLagConfig,
     "crpo": CRPOConfig,
     "pcrpo": PCRPOConfig,
 }
@@ -203,19 +282,15 @@ class SafeLearner(TeamLearner):
         )
         self.episode_cost = 0.0
         """The last estimate of the observed episode cost J_c."""
-        self.algo_state: dict[str, Any] = {}
-        if isinstance(config, PPOLagConfig):
-            lam = torch.tensor(float(config.multiplier_init), requires_grad=True)
-            self.algo_state = {
-                "multiplier": lam,
-                "multiplier_optimizer": torch.optim.Adam([lam], lr=config.multiplier_lr),
-            }
+        self.algo_state: dict[str, Any] = config.initial_state()
 
     @property
     def multiplier(self) -> float | None:
-        """PPO-Lagrangian's current λ (None for CRPO and PCRPO)."""
+        """The Lagrangian learners' current λ (None for CRPO and PCRPO)."""
         lam = self.algo_state.get("multiplier")
-        return None if lam is None else float(lam.detach())
+        if isinstance(lam, torch.Tensor):
+            return float(lam.detach())
+        return None if lam is None else float(lam)
 
     def learn(self, steps: int, stats: EpisodeStats | None = None) -> None:
         """Train for (at least) `steps` more environment steps."""
@@ -250,9 +325,12 @@ class SafeLearner(TeamLearner):
         """Actors and the learner state (as `TeamLearner.save`), plus the constraint state."""
         specs = super().save(folder, deterministic)
         extra: dict[str, Any] = {"format": _SAFE_STATE, "episode_cost": self.episode_cost}
-        if self.algo_state:
-            extra["multiplier"] = self.algo_state["multiplier"].detach().clone()
-            extra["multiplier_optimizer"] = self.algo_state["multiplier_optimizer"].state_dict()
+        state = self.algo_state
+        if "multiplier_optimizer" in state:  # PPO-Lagrangian
+            extra["multiplier"] = state["multiplier"].detach().clone()
+            extra["multiplier_optimizer"] = state["multiplier_optimizer"].state_dict()
+        elif state:  # plain numbers (PID-Lagrangian)
+            extra["controller"] = dict(state)
         torch.save(extra, Path(folder) / f"{self.config.algo}_constraint.pt")
         return specs
 
@@ -272,7 +350,9 @@ class SafeLearner(TeamLearner):
             raise ConfigError(f"No {config.algo} constraint state at {path}.")
         extra = torch.load(path, map_location="cpu", weights_only=True)
         learner.episode_cost = float(extra["episode_cost"])
-        if learner.algo_state:
+        if "controller" in extra:
+            learner.algo_state = dict(extra["controller"])
+        elif learner.algo_state:
             with torch.no_grad():
                 learner.algo_state["multiplier"].copy_(extra["multiplier"])
             learner.algo_state["multiplier_optimizer"].load_state_dict(

@@ -29,7 +29,7 @@ import advgame
 import advgame.cli
 import advgame.core.registry
 from advgame import ObservationDisruptor, RewardDisruptor
-from advgame.agents.safe import SAFE_LEARNERS, CRPOConfig, PCRPOConfig, PPOLagConfig
+from advgame.agents.safe import SAFE_LEARNERS, CRPOConfig, PCRPOConfig, PIDLagConfig, PPOLagConfig
 from advgame.agents.safe_ppo import project
 from advgame.core.team import team_factory
 from advgame.errors import ConfigError, UnknownNameError
@@ -125,6 +125,10 @@ def test_bad_safe_input_is_a_clear_error() -> None:
         learner_config("crpo", {"cost_limit": -5.0})
     with pytest.raises(ConfigError, match="multiplier_lr"):
         PPOLagConfig(multiplier_lr=float("nan"))
+    with pytest.raises(ConfigError, match="d_delay"):
+        learner_config("ppo-pid", {"d_delay": 0})
+    with pytest.raises(ConfigError, match="p_ema"):
+        PIDLagConfig(p_ema=1.0)
     with pytest.raises(ConfigError, match="cost limit"):
         PayoffTable([{"protagonist": "p", "adversary": "a", "seed": 0, "true_return": 1}]).safety(
             -1
@@ -150,11 +154,37 @@ def test_switching_rules_follow_the_episode_cost() -> None:
     assert band.project and (band.reward_weight, band.cost_weight) == (0.4, 0.6)
 
 
+def test_the_pid_multiplier_follows_its_controller() -> None:
+    """P on the error's EMA, I clamped at 0, D on the cost EMA's rise; λ within [0, max]."""
+    cfg = PIDLagConfig(cost_limit=10.0, kp=1.0, ki=0.1, kd=0.0, p_ema=0.0, multiplier_init=0.5)
+    state = cfg.initial_state()
+    way = cfg.direction(30.0, state)  # δ = 20: P 20, I 0.5 + 2
+    assert state["multiplier"] == pytest.approx(22.5)
+    assert way.cost_weight == pytest.approx(22.5 / 23.5)
+    cfg.direction(0.0, state)  # δ = -10: P -10 pulls λ to 0 at once, I 2.5 - 1 = 1.5
+    assert state["multiplier"] == 0.0 and state["integral"] == pytest.approx(1.5)
+    capped = PIDLagConfig(cost_limit=0.0, multiplier_max=3.0)
+    s2 = capped.initial_state()
+    assert capped.direction(1e6, s2).cost_weight == pytest.approx(3.0 / 4.0)
+    rising = PIDLagConfig(cost_limit=100.0, kp=0.0, ki=0.0, kd=1.0, d_ema=0.0, d_delay=2)
+    s3 = rising.initial_state()
+    rising.direction(10.0, s3)  # the cost rose by 10 over the delay: D alone gives λ
+    assert s3["multiplier"] == pytest.approx(0.001 + 10.0)
+    for _ in range(5):
+        rising.direction(10.0, s3)
+    assert len(s3["history"]) == 2 and s3["multiplier"] == pytest.approx(0.001)
+
+
 # -- learning -------------------------------------------------------------------------------
 LIMIT = 20.0
 FAST = {"n_steps": 500, "batch_size": 100, "learning_rate": 2e-3, "lr_decay": False}
 FAST |= {"log_std_init": -0.5, "cost_limit": LIMIT}
-TUNED = {"ppo-lag": {"multiplier_lr": 0.5}, "crpo": {"slack": 0.5}, "pcrpo": {"slack": 0.5}}
+TUNED = {
+    "ppo-lag": {"multiplier_lr": 0.5},
+    "ppo-pid": {"ki": 0.05},
+    "crpo": {"slack": 0.5},
+    "pcrpo": {"slack": 0.5},
+}
 
 
 def _evaluate(policy: Any, seed: int = 7, episodes: int = 10) -> tuple[float, float]:
@@ -284,8 +314,9 @@ def test_the_report_gains_episode_cost_and_constraint_satisfaction(tmp_path: Pat
     assert (tmp_path / "safety.png").stat().st_size > 0
 
 
-def test_save_and_load_restore_the_multiplier_and_the_learner(tmp_path: Path) -> None:
-    cfg = PPOLagConfig(n_steps=100, batch_size=50, cost_limit=1.0, multiplier_lr=0.5)
+@pytest.mark.parametrize("algo", ["ppo-lag", "ppo-pid"])
+def test_save_and_load_restore_the_multiplier_and_the_learner(tmp_path: Path, algo: str) -> None:
+    cfg = learner_config(algo, {"n_steps": 100, "batch_size": 50, "cost_limit": 1.0})
     fns = [team_factory(REACHER, preset="default")]
     learner = cfg.make_learner(fns, 0, 400)
     learner.learn(200)
@@ -293,6 +324,7 @@ def test_save_and_load_restore_the_multiplier_and_the_learner(tmp_path: Path) ->
     learner.save(tmp_path)
     back = cfg.load_learner(tmp_path, fns)
     assert back.multiplier == learner.multiplier and back.episode_cost == learner.episode_cost
+    assert back.algo_state.keys() == learner.algo_state.keys()
     assert back.steps == learner.steps == 200
     a, b = learner.model.state_dict(), back.model.state_dict()
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)

@@ -23,6 +23,7 @@ from advgame.evaluation.plots import (
     plot_safety,
     plot_training_curves,
 )
+from advgame.training.config import SAFE_ALGOS
 
 __all__ = [
     "DEFAULT_COST_LIMIT",
@@ -56,7 +57,7 @@ def runs_cost_limit(run_dirs: Iterable[str | Path]) -> float | None:
         hparams = cfg.get("protagonist_hparams") or {}
         if "cost_limit" in hparams:
             limits.append(float(hparams["cost_limit"]))
-        elif cfg.get("protagonist_algo") in ("ppo-lag", "crpo", "pcrpo"):
+        elif cfg.get("protagonist_algo") in SAFE_ALGOS:
             limits.append(DEFAULT_COST_LIMIT)
     return min(limits) if limits else None
 

@@ -24,7 +24,7 @@ __all__ = ["METHODS", "PROTAGONISTS", "SAFE_ALGOS", "TEAM_ALGOS", "TrainConfig",
 _LEARNERS = "advgame.agents.sb3:LEARNERS"
 _TEAM_LEARNERS = "advgame.agents.marl:MARL_LEARNERS"
 _SAFE_LEARNERS = "advgame.agents.safe:SAFE_LEARNERS"
-SAFE_ALGOS = ("ppo-lag", "crpo", "pcrpo")
+SAFE_ALGOS = ("ppo-lag", "ppo-pid", "crpo", "pcrpo")
 """Constrained protagonist learners (safe scenarios): PPO-Lagrangian, CRPO, PCRPO."""
 TEAM_ALGOS = ("mappo", "ippo", *SAFE_ALGOS)
 """Protagonist learners that train the whole protagonist team on `advgame.core.team.TeamView`s
@@ -84,11 +84,11 @@ class TrainConfig:
     """Adversary agents trained in the adversary phase (None: every adversary the preset gives
     no fixed policy; []: none, i.e. plain training against fixed or no-op adversaries)."""
     protagonist_algo: Literal[
-        "ppo", "sa-ppo", "sac", "td3", "mappo", "ippo", "ppo-lag", "crpo", "pcrpo"
+        "ppo", "sa-ppo", "sac", "td3", "mappo", "ippo", "ppo-lag", "ppo-pid", "crpo", "pcrpo"
     ] = "ppo"
     """Protagonist learner: SB3 PPO/SAC/TD3 or SA-PPO (PPO with the state-adversarial
     regulariser) for one protagonist, MAPPO/IPPO for a team, or a constrained learner
-    (PPO-Lagrangian, CRPO, PCRPO) on a safe scenario."""
+    (PPO-Lagrangian, PID-Lagrangian, CRPO, PCRPO) on a safe scenario."""
     adversary_algo: Literal["ppo", "sac"] = "ppo"
     """Learner of each learned adversary."""
     protagonist_hparams: dict[str, Any] | None = None
