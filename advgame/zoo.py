@@ -77,7 +77,8 @@ class ZooEntry:
     threat: str
     """The threat model (preset) the attacks played in."""
     algo: str = "ppo"
-    """The SB3 algorithm of the protagonist file."""
+    """The SB3 algorithm of the protagonist file, or the constrained/team learner
+    (`advgame.training.TEAM_ALGOS`) whose actors file (with its normalizers) it is."""
     files: dict[str, dict[str, str]] = field(default_factory=dict)
     """``{"protagonist" | "normalizer" | "adversary": {"path": relative path, "sha256": hex}}``."""
     config: dict[str, Any] = field(default_factory=dict)
@@ -133,8 +134,11 @@ def verify(entry: ZooEntry, root: Path) -> None:
 def load(entry_id: str, root: str | Path | None = None, *, adversary: bool = False) -> Any:
     """The released protagonist `entry_id` as a policy spec (or its strongest adversary).
 
-    The files are checked against the manifest's sha256 first.
+    A constrained or team learner's agent is ``{protagonist id: spec}``, as
+    `advgame.evaluation.run_protagonist` gives it. The files are checked against the
+    manifest's sha256 first.
     """
+    from advgame.training import TEAM_ALGOS
     from advgame.training.checkpoint import SB3Checkpoint
 
     base = Path(root) if root is not None else default_root()
@@ -148,6 +152,10 @@ def load(entry_id: str, root: str | Path | None = None, *, adversary: bool = Fal
         return SB3Checkpoint(
             str(base / f["path"]), "ppo", str(base / norm["path"]) if norm else None
         )
+    if entry.algo in TEAM_ALGOS:
+        from advgame.evaluation.protagonists import team_protagonist
+
+        return team_protagonist(entry.scenario, base / entry.files["protagonist"]["path"])
     norm = entry.files.get("normalizer")
     return SB3Checkpoint(
         str(base / entry.files["protagonist"]["path"]),
@@ -223,16 +231,21 @@ def release_campaign(
     for row in rows:
         run = run_dir(out, row["median_agent"])
         cfg, spec = run_protagonist(run)
-        sources = {"protagonist": Path(spec.path)}
-        if spec.normalizer:
-            sources["normalizer"] = Path(spec.normalizer)
+        if isinstance(spec, dict):  # a constrained or team learner: one actors file for all
+            sources = {"protagonist": Path(next(iter(spec.values())).path)}
+            algo = cfg.protagonist_algo
+        else:
+            sources = {"protagonist": Path(spec.path)}
+            if spec.normalizer:
+                sources["normalizer"] = Path(spec.normalizer)
+            algo = spec.algo
         sources.update(_strongest_adversary(run, optimal.get(row["median_agent"], {})))
         entry = ZooEntry(
             id=f"{env}/{row['method']}", scenario=campaign.scenario, method=row["method"],
             steps=cfg.protagonist_steps * cfg.iterations + cfg.warmup_steps, seed=cfg.seed,
             natural_return=float(row["natural"]), worst_attack_return=float(row["worst"]),
             worst_attack=row["worst_attack"], threat=campaign.threat or "default",
-            algo=spec.algo, config=read_json(run / "config.json", "run config"),
+            algo=algo, config=read_json(run / "config.json", "run config"),
         )  # fmt: skip
         released.append(release(entry, sources, root))
     return released

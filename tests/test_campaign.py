@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+import advgame
 from advgame.campaign import load_campaign, run_dir
 from advgame.cli import main
 from advgame.errors import ConfigError, FileFormatError
@@ -166,7 +167,8 @@ def test_every_released_agent_matches_its_manifest_and_plays() -> None:
     for e in found:
         spec = zoo.load(e.id)  # verifies the sha256 of every file
         game = advgame.make(e.scenario, preset=e.threat, max_episode_steps=20)
-        [result] = rollout(game, {"protagonist": spec}, seed=0)
+        policies = spec if isinstance(spec, dict) else {"protagonist": spec}  # safe: actors
+        [result] = rollout(game, policies, seed=0)
         assert result.length >= 1
         game.close()
 
@@ -206,6 +208,19 @@ def test_a_safe_campaign_tables_return_cost_and_satisfaction_per_method(tmp_path
         line = next(ln for ln in table.splitlines() if ln.startswith(f"| {method} | nominal |"))
         assert line.endswith(f"| {share:.0f} % |")
         assert f"| {sum(costs) / len(costs):.4g} |" in line
+    # A constrained learner's agent is released as its actors file and plays from the zoo.
+    from advgame import zoo
+    from advgame.core.episodes import rollout
+
+    root = tmp_path / "zoo"
+    args = ["campaign", str(spec), "--workers", "1", "--no-progress", "--release", str(root)]
+    assert main(args) == 0
+    lag = zoo.entry("safetyhopper/ppo-lag", root)
+    assert lag.algo == "ppo-lag" and set(lag.files) == {"protagonist"}
+    policies = zoo.load("safetyhopper/ppo-lag", root)
+    assert set(policies) == {"protagonist"}
+    game = advgame.make("SafetyHopper-v5", max_episode_steps=5)
+    assert rollout(game, policies, seed=0)[0].length >= 1
     spec.write_text(SAFE.replace("cost_limit = 25", "cost_limit = -1"))
     with pytest.raises(ConfigError, match="cost_limit"):
         load_campaign(spec)
