@@ -40,7 +40,7 @@ Example:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -108,6 +108,13 @@ class SafePPOConfig(TeamPPOConfig):
         """The algorithm's own state before the first update (λ and its controller; none)."""
         return {}
 
+    def save_state(self, state: dict[str, Any]) -> dict[str, Any]:
+        """What a checkpoint keeps of `state` (entries of the constraint file; none)."""
+        return {}
+
+    def load_state(self, state: dict[str, Any], saved: Mapping[str, Any]) -> None:
+        """Restore `state` in place from a constraint file's entries (`save_state`'s)."""
+
     def learner_class(self) -> type[SafeLearner]:
         """The constrained learner (a `TeamLearner` with a cost critic)."""
         return SafeLearner
@@ -134,6 +141,19 @@ class PPOLagConfig(SafePPOConfig):
             "multiplier_optimizer": torch.optim.Adam([lam], lr=self.multiplier_lr),
         }
 
+    def save_state(self, state: dict[str, Any]) -> dict[str, Any]:
+        """λ and its optimizer's state."""
+        return {
+            "multiplier": state["multiplier"].detach().clone(),
+            "multiplier_optimizer": state["multiplier_optimizer"].state_dict(),
+        }
+
+    def load_state(self, state: dict[str, Any], saved: Mapping[str, Any]) -> None:
+        """λ copied into its tensor, the optimizer's state loaded."""
+        with torch.no_grad():
+            state["multiplier"].copy_(saved["multiplier"])
+        state["multiplier_optimizer"].load_state_dict(saved["multiplier_optimizer"])
+
     def direction(self, episode_cost: float, state: dict[str, Any]) -> Direction:
         """Step λ on ``J_c - limit`` (Adam, clamped at 0); weights 1/(1+λ), λ/(1+λ)."""
         lam, opt = state["multiplier"], state["multiplier_optimizer"]
@@ -142,8 +162,7 @@ class PPOLagConfig(SafePPOConfig):
         opt.step()
         with torch.no_grad():
             lam.clamp_(min=0.0)
-        value = float(lam.detach())
-        return Direction(1.0 / (1.0 + value), value / (1.0 + value))
+        return _lagrangian(float(lam.detach()))
 
 
 @dataclass(frozen=True)
@@ -198,7 +217,21 @@ class PIDLagConfig(SafePPOConfig):
         lam = min(max(0.0, raw), self.multiplier_max)
         state["history"] = [*state["history"], state["cost"]][-self.d_delay :]
         state["multiplier"] = lam
-        return Direction(1.0 / (1.0 + lam), lam / (1.0 + lam))
+        return _lagrangian(lam)
+
+    def save_state(self, state: dict[str, Any]) -> dict[str, Any]:
+        """The controller's numbers, as they are."""
+        return {"controller": dict(state)}
+
+    def load_state(self, state: dict[str, Any], saved: Mapping[str, Any]) -> None:
+        """The controller's numbers, replaced."""
+        state.clear()
+        state.update(saved["controller"])
+
+
+def _lagrangian(lam: float) -> Direction:
+    """The Lagrangian's weights for multiplier λ: reward 1/(1+λ), cost λ/(1+λ)."""
+    return Direction(1.0 / (1.0 + lam), lam / (1.0 + lam))
 
 
 @dataclass(frozen=True)
@@ -325,12 +358,7 @@ class SafeLearner(TeamLearner):
         """Actors and the learner state (as `TeamLearner.save`), plus the constraint state."""
         specs = super().save(folder, deterministic)
         extra: dict[str, Any] = {"format": _SAFE_STATE, "episode_cost": self.episode_cost}
-        state = self.algo_state
-        if "multiplier_optimizer" in state:  # PPO-Lagrangian
-            extra["multiplier"] = state["multiplier"].detach().clone()
-            extra["multiplier_optimizer"] = state["multiplier_optimizer"].state_dict()
-        elif state:  # plain numbers (PID-Lagrangian)
-            extra["controller"] = dict(state)
+        extra.update(self.config.save_state(self.algo_state))
         torch.save(extra, Path(folder) / f"{self.config.algo}_constraint.pt")
         return specs
 
@@ -350,12 +378,5 @@ class SafeLearner(TeamLearner):
             raise ConfigError(f"No {config.algo} constraint state at {path}.")
         extra = torch.load(path, map_location="cpu", weights_only=True)
         learner.episode_cost = float(extra["episode_cost"])
-        if "controller" in extra:
-            learner.algo_state = dict(extra["controller"])
-        elif learner.algo_state:
-            with torch.no_grad():
-                learner.algo_state["multiplier"].copy_(extra["multiplier"])
-            learner.algo_state["multiplier_optimizer"].load_state_dict(
-                extra["multiplier_optimizer"]
-            )
+        config.load_state(learner.algo_state, extra)
         return learner

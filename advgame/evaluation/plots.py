@@ -53,6 +53,21 @@ def _save(fig: Any, path: str | Path) -> Path:
     return path
 
 
+def _panel_column(count: int, height: float) -> tuple[Any, list[Any]]:
+    """A figure of `count` panels stacked in one column, `height` inches each."""
+    fig, axes = _pyplot().subplots(
+        count, 1, figsize=(6.5, height * count), squeeze=False, layout="constrained"
+    )
+    return fig, list(axes[:, 0])
+
+
+def _finish_panel(ax: Any, ylabel: str) -> None:
+    """Label a curves panel's y axis, add its grid and legend."""
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize="small")
+
+
 def plot_heatmap(table: PayoffTable, path: str | Path, stat: str = "mean", title: str = "") -> Path:
     """Draw protagonists × adversaries, the `stat` true return of each cell, annotated; save it.
 
@@ -173,20 +188,15 @@ def plot_training_curves(
     if not panels:
         log.warning("nothing to plot from %s", dict(progress_csv_paths))
         return None
-    plt = _pyplot()
-    fig, axes = plt.subplots(
-        len(panels), 1, figsize=(6.5, 2.6 * len(panels)), squeeze=False, layout="constrained"
-    )
-    for ax, col in zip(axes[:, 0], panels, strict=True):
+    fig, axes = _panel_column(len(panels), 2.6)
+    for ax, col in zip(axes, panels, strict=True):
         for name, cols in runs.items():
             xcol = x or next((k for k in X_COLUMNS if k in cols), None)
             if col in cols and (xcol in cols or xcol is None):
                 xs = cols[xcol] if xcol else np.arange(len(cols[col]))
                 ax.plot(xs, cols[col], marker=".", label=name)
                 ax.set_xlabel(xcol or "row")
-        ax.set_ylabel(col)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize="small")
+        _finish_panel(ax, col)
     return _save(fig, path)
 
 
@@ -200,8 +210,8 @@ def plot_method_curves(
     """Draw each group's (method's) mean training curve over its runs, with their min-max band.
 
     `groups` maps a label to the progress CSVs of its runs (seeds); one panel per column of
-    `columns`; runs are cut to the shortest one's rows (x read from the first). `lines` draws a dashed
-    horizontal line on a column's panel (a cost limit). Runs without the columns are skipped;
+    `columns`; runs are cut to the shortest one's rows (x read from the first). `lines` draws a
+    dashed horizontal line on a column's panel (a cost limit). Runs without the columns are skipped;
     returns None (and writes nothing) if nothing is left.
     """
     data: dict[str, dict[str, np.ndarray]] = {}
@@ -215,11 +225,8 @@ def plot_method_curves(
         data[label] = {c: np.stack([r[c][:n] for r in runs]) for c in (x, *columns)}
     if not data:
         return None
-    plt = _pyplot()
-    fig, axes = plt.subplots(
-        len(columns), 1, figsize=(6.5, 2.8 * len(columns)), squeeze=False, layout="constrained"
-    )
-    for ax, col in zip(axes[:, 0], columns, strict=True):
+    fig, axes = _panel_column(len(columns), 2.8)
+    for ax, col in zip(axes, columns, strict=True):
         for label, d in data.items():
             xs, ys = d[x][0], d[col]
             (line,) = ax.plot(xs, np.nanmean(ys, axis=0), label=f"{label} ({len(ys)})")
@@ -227,9 +234,8 @@ def plot_method_curves(
                             color=line.get_color(), alpha=0.2)  # fmt: skip
         if lines and col in lines:
             ax.axhline(lines[col], color="k", linestyle="--", linewidth=1, label="limit")
-        ax.set(xlabel=x, ylabel=col)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize="small")
+        ax.set_xlabel(x)
+        _finish_panel(ax, col)
     return _save(fig, path)
 
 

@@ -25,7 +25,8 @@ _LEARNERS = "advgame.agents.sb3:LEARNERS"
 _TEAM_LEARNERS = "advgame.agents.marl:MARL_LEARNERS"
 _SAFE_LEARNERS = "advgame.agents.safe:SAFE_LEARNERS"
 SAFE_ALGOS = ("ppo-lag", "ppo-pid", "crpo", "pcrpo")
-"""Constrained protagonist learners (safe scenarios): PPO-Lagrangian, CRPO, PCRPO."""
+"""Constrained protagonist learners (safe scenarios): PPO-Lagrangian, PID-Lagrangian, CRPO,
+PCRPO."""
 TEAM_ALGOS = ("mappo", "ippo", *SAFE_ALGOS)
 """Protagonist learners that train the whole protagonist team on `advgame.core.team.TeamView`s
 (our torch learners) instead of one SB3 agent."""
