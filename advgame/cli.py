@@ -173,13 +173,17 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from advgame.evaluation.demo import demo, demo_zoo, zoo_summary
+    from advgame.evaluation.demo import demo, demo_safe, demo_zoo, safe_summary, zoo_summary
 
     out = Path(args.out)
     zoo_report = demo_zoo(out / "zoo", quick=args.quick, workers=args.workers)
     if zoo_report is not None:
         print(zoo_summary(zoo_report.parent))
         print(f"zoo report: {zoo_report}")
+    safe_report = demo_safe(out / "safe", quick=args.quick, workers=args.workers)
+    if safe_report is not None:
+        print(safe_summary(safe_report.parent))
+        print(f"safe report: {safe_report}")
     print(f"report: {demo(out, quick=args.quick, workers=args.workers)}")
     return 0
 

@@ -220,6 +220,20 @@ def test_quick_demo_trains_evaluates_and_prints_the_report_path(tmp_path: Path, 
         assert f"zoo report: {out / 'zoo' / 'report.md'}" in printed
         zoo_report = (out / "zoo" / "report.md").read_text()
         assert all(f"| {r} |" in zoo_report for r in released) and "attack optimal" in zoo_report
+    safe = [e.id for e in zoo.entries() if e.scenario == "SafetyHopper-v5"]
+    if safe:  # the released safe agents, nominally and under action noise, with their cost
+        assert f"safe report: {out / 'safe' / 'report.md'}" in printed
+        from advgame.evaluation.payoff import PayoffTable
+
+        table = PayoffTable.from_csv(out / "safe" / "payoff.csv")
+        assert sorted(table.protagonists) == sorted(safe)
+        assert set(table.adversaries) == {"nominal", "preset action-gauss-0.3"}
+        cost = {
+            c["protagonist"]: c["cost"] for c in table.safety(25) if c["adversary"] == "nominal"
+        }
+        if {"safetyhopper/ppo", "safetyhopper/pcrpo"} <= set(cost):  # the constraint binds
+            assert cost["safetyhopper/ppo"] > 25 >= cost["safetyhopper/pcrpo"]
+        assert all(f"  {p} " in printed for p in safe)
     report = (out / "report.md").read_text()
     assert "ppo" in report and "atla" in report
     assert "attack mad" in report and "attack critic" in report  # the worst-of-attacks suite

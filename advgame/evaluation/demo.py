@@ -1,4 +1,4 @@
-"""The demo: the zoo's Hopper agents under attack; PPO and ATLA-PPO trained briefly, evaluated.
+"""The demo: released agents under attack and noise; PPO and ATLA-PPO trained briefly, evaluated.
 
 What the README's first command runs (``advgame demo``); `train_or_resume` is shared with the
 reproduction scripts.
@@ -11,14 +11,30 @@ from pathlib import Path
 from typing import Any
 
 from advgame.core.config import read_json
+from advgame.evaluation.report import DEFAULT_COST_LIMIT
 from advgame.evaluation.suite import evaluate_runs
 from advgame.training import TrainConfig
 
-__all__ = ["ZOO_ATTACKS", "demo", "demo_zoo", "train_or_resume", "zoo_summary"]
+__all__ = [
+    "SAFE_COLUMNS",
+    "ZOO_ATTACKS",
+    "demo",
+    "demo_safe",
+    "demo_zoo",
+    "safe_summary",
+    "train_or_resume",
+    "zoo_summary",
+]
 
 ZOO_ATTACKS = ("attack:random", "attack:mad", "attack:critic")
 """The demo's columns for the released agents, beside nominal and each agent's own released
 adversary (``attack optimal``): every one is cheap to play (no critic to train)."""
+
+SAFE_COLUMNS = ("preset:action-gauss-0.3",)
+"""The demo's column for the released safe agents beside nominal: the paper's action noise."""
+
+SAFE_SCENARIO = "SafetyHopper-v5"
+"""The safe task whose released agents the demo plays."""
 
 log = logging.getLogger(__name__)
 
@@ -125,4 +141,50 @@ def zoo_summary(folder: Path) -> str:
             f"  {m['protagonist']:<18} nominal {m['nominal']:7.0f}   under the strongest attack "
             f"{m['worst']:7.0f}  ({m['worst_adversary']})"
         )
+    return "\n".join(lines)
+
+
+def demo_safe(
+    out: Path, quick: bool = False, workers: int = 2, root: Path | None = None
+) -> Path | None:
+    """The released SafetyHopper-v5 agents nominally and under the paper's action noise.
+
+    Every SafetyHopper-v5 agent of the zoo (plain PPO and the constrained learners) plays
+    `SAFE_COLUMNS` beside nominal; the report shows return and true episode cost against the
+    limit. Returns the folder's ``report.md``, or None when the zoo holds no such agent.
+    """
+    from advgame import zoo
+
+    found = [e.id for e in zoo.entries(root) if e.scenario == SAFE_SCENARIO]
+    if not found:
+        log.info("the zoo has no %s agent; skipping the safe evaluation", SAFE_SCENARIO)
+        return None
+    return evaluate_runs(
+        [],
+        out,
+        zoo=found,
+        zoo_root=root,
+        adversaries=SAFE_COLUMNS,
+        seeds=1 if quick else 3,
+        episodes=1,
+        workers=workers,
+        budgets=(),
+    )
+
+
+def safe_summary(folder: Path, limit: float = DEFAULT_COST_LIMIT) -> str:
+    """The table of `demo_safe` in a few lines: return, episode cost and how often within `limit`."""
+    from advgame.evaluation.payoff import PayoffTable
+
+    table = PayoffTable.from_csv(folder / "payoff.csv")
+    cells = {(c["protagonist"], c["adversary"]): c for c in table.safety(limit)}
+    lines = [f"released {SAFE_SCENARIO} agents (mean true return / episode cost, limit {limit:g}):"]
+    for p in table.protagonists:
+        parts = []
+        for a in table.adversaries:
+            c = cells.get((p, a))
+            if c is not None:
+                within = f"{100 * c['satisfied']:3.0f} % within"
+                parts.append(f"{a} {c['return']:6.0f} / {c['cost']:4.0f} ({within})")
+        lines.append(f"  {p:<22} " + "   ".join(parts))
     return "\n".join(lines)
