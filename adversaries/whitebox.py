@@ -90,6 +90,16 @@ class _Attack:
         """What the attack maximises, per row of the batch (``[batch]``)."""
         raise NotImplementedError
 
+    def row_scorer(
+        self, victim: WhiteBox, clean: torch.Tensor
+    ) -> Callable[[torch.Tensor], torch.Tensor]:
+        """`row_objective` for one batch of clean rows, as a function of the attacked rows.
+
+        A walk scores many attacked batches against the same clean rows; an attack with work
+        that depends on the clean rows alone (MAD's reference action) does it here, once.
+        """
+        return lambda attacked: self.row_objective(victim, clean, attacked)
+
     def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
         """What the attack maximises over the batch (a scalar tensor: the rows' sum)."""
         return self.row_objective(victim, clean, attacked).sum()
@@ -136,15 +146,25 @@ class MADAttack(_Attack):
         self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor
     ) -> torch.Tensor:
         """Per row, the KL (or squared distance) between the clean and the attacked action."""
+        return self.row_scorer(victim, clean)(attacked)
+
+    def row_scorer(
+        self, victim: WhiteBox, clean: torch.Tensor
+    ) -> Callable[[torch.Tensor], torch.Tensor]:
+        """`row_objective` with the clean rows' action computed once for the whole walk."""
         import torch
 
         with torch.no_grad():
             reference = victim.action_mean(clean)
-        diff = victim.action_mean(attacked) - reference
         std = victim.action_std()
-        if std is None:
-            return (diff * diff).sum(-1)
-        return (diff * diff / (2.0 * std * std)).sum(-1)
+
+        def score(attacked: torch.Tensor) -> torch.Tensor:
+            diff = victim.action_mean(attacked) - reference
+            if std is None:
+                return (diff * diff).sum(-1)
+            return (diff * diff / (2.0 * std * std)).sum(-1)
+
+        return score
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -347,11 +367,12 @@ class WhiteBoxAttackPolicy:
         clean, perturb = self._problem(policies, target)
         best_u, best = np.zeros((n, size)), np.full(n, -np.inf)
         with torch.enable_grad():
+            score = self._scorer(victim, clean)
             for _ in range(1 + self.spec.restarts):
                 u = self._project(np.stack([p.rng.uniform(-1.0, 1.0, size) for p in policies]))
                 for step in range(self.spec.steps + 1):
                     u_t = torch.as_tensor(u, dtype=torch.float32).requires_grad_(True)
-                    values = self._values(victim, clean, perturb(u_t))
+                    values = score(perturb(u_t))
                     scores = values.detach().numpy().astype(np.float64)
                     better = scores > best
                     best_u[better], best[better] = u[better], scores[better]
@@ -361,11 +382,14 @@ class WhiteBoxAttackPolicy:
                     u = self._project(u + self.alpha * self._direction(grad.numpy()))
         return best_u
 
-    def _values(self, victim: Any, clean: Any, attacked: Any) -> Any:
-        """The objective per row (``[N]``); an attack scored as one scalar plays one row."""
+    def _scorer(self, victim: Any, clean: Any) -> Callable[[Any], Any]:
+        """Attacked rows -> the objective per row (``[N]``).
+
+        An attack scored as one scalar plays one row.
+        """
         if self.spec.rowwise:
-            return self.spec.row_objective(victim, clean, attacked)
-        return self.spec.objective(victim, clean, attacked).reshape(1)
+            return self.spec.row_scorer(victim, clean)
+        return lambda attacked: self.spec.objective(victim, clean, attacked).reshape(1)
 
     def _direction(self, grad: np.ndarray) -> np.ndarray:
         """Steepest ascent for the ball, per row: the gradient's sign (L∞) or direction (L2)."""

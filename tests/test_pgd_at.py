@@ -24,13 +24,13 @@ def test_the_attack_reads_the_live_learner_and_collection_leaves_it_unchanged(
 ) -> None:
     torch.set_num_threads(1)
     seen: list[Any] = []
-    objective = MADAttack.row_objective
+    scorer = MADAttack.row_scorer  # what each walk of the attack scores its iterates with
 
-    def spy(self: MADAttack, victim: Any, clean: Any, attacked: Any) -> Any:
+    def spy(self: MADAttack, victim: Any, clean: Any) -> Any:
         seen.append(victim.model)
-        return objective(self, victim, clean, attacked)
+        return scorer(self, victim, clean)
 
-    monkeypatch.setattr(MADAttack, "row_objective", spy)
+    monkeypatch.setattr(MADAttack, "row_scorer", spy)
     fns = [view_factory("Hopper-v5", "protagonist", {"observation_adversary": MADAttack(steps=2)},
                         preset="atla") for _ in range(2)]  # fmt: skip
     side = Side("protagonist", PPOConfig(n_steps=64, batch_size=32, n_epochs=1), fns, 0, 256)

@@ -160,6 +160,33 @@ def test_sb3_policies_are_attacked_without_being_modified(algo: str) -> None:
     assert [_state_bytes_of(opt) for opt in _optimizers(model)] == optimizer_before
 
 
+@pytest.mark.usefixtures("one_torch_thread")
+def test_the_lean_ppo_mean_is_sb3s_distribution_mean_bit_for_bit() -> None:
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    model = PPO("MlpPolicy", gym.make("Hopper-v5"), n_steps=64, batch_size=32, seed=0, device="cpu")
+    model.learn(64)  # leaves the policy in training mode; the attack must evaluate it in eval
+    rng = np.random.default_rng(0)
+    victim = SB3Policy(model, rng.normal(size=11), rng.uniform(0.5, 2.0, 11))
+    obs = torch.as_tensor(rng.normal(size=(7, 11)), dtype=torch.float32).requires_grad_(True)
+    lean = victim.action_mean(obs)
+    assert not model.policy.training
+    (lean_grad,) = torch.autograd.grad(lean.square().sum(), obs)
+    sb3 = model.policy.get_distribution(victim._features(obs)).distribution.mean
+    (sb3_grad,) = torch.autograd.grad(sb3.square().sum(), obs)
+    assert torch.equal(lean, sb3) and torch.equal(lean_grad, sb3_grad)
+
+    class Shifted(type(model.policy)):  # overrides the distribution: the lean path steps aside
+        def get_distribution(self, obs):  # type: ignore[no-untyped-def]
+            dist = super().get_distribution(obs)
+            dist.distribution.loc = dist.distribution.loc + 1.0
+            return dist
+
+    model.policy.__class__ = Shifted
+    assert torch.equal(victim.action_mean(obs.detach()), lean.detach() + 1.0)
+
+
 def _grads(module: torch.nn.Module) -> list[bytes | None]:
     return [None if p.grad is None else p.grad.numpy().tobytes() for p in module.parameters()]
 

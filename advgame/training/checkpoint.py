@@ -121,6 +121,25 @@ def _vecnormalize_stats(path: str) -> Normalizer | None:
     return Normalizer(rms.mean, rms.var, float(norm.clip_obs), float(norm.epsilon))
 
 
+def _plain_gaussian(policy: Any) -> bool:
+    """Whether `policy` is SB3's own `ActorCriticPolicy` with a plain diagonal Gaussian.
+
+    Then the Gaussian's mean is ``action_net(forward_actor(features))``, exactly what
+    ``get_distribution(obs).distribution.mean`` computes; anything overriding those steps (or
+    another distribution) goes through ``get_distribution``.
+    """
+    from stable_baselines3.common.distributions import DiagGaussianDistribution
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    kind = type(policy)
+    return (
+        isinstance(policy, ActorCriticPolicy)
+        and kind.get_distribution is ActorCriticPolicy.get_distribution
+        and kind._get_action_dist_from_latent is ActorCriticPolicy._get_action_dist_from_latent
+        and type(policy.action_dist) is DiagGaussianDistribution
+    )
+
+
 class SB3Policy:
     """An SB3 model's policy, behind the observation normalizer it was trained with.
 
@@ -273,7 +292,8 @@ class SB3Policy:
         """Raw observation batch -> the network's input (normalized and clipped as in training)."""
         import torch
 
-        self.model.policy.set_training_mode(False)
+        if self.model.policy.training:  # (walking every module each call costs more than the pass)
+            self.model.policy.set_training_mode(False)
         if self.mean is None or self.std is None:
             return obs
         mean = torch.as_tensor(self.mean, dtype=torch.float32)
@@ -283,6 +303,12 @@ class SB3Policy:
     def action_mean(self, obs: Any) -> Any:
         """The mean action (PPO: the Gaussian's mean; SAC/TD3: the deterministic actor's)."""
         policy, x = self.model.policy, self._features(obs)
+        if _plain_gaussian(policy):  # get_distribution's mean, without building the distribution
+            from stable_baselines3.common.policies import ActorCriticPolicy
+
+            extract = super(ActorCriticPolicy, policy).extract_features  # type: ignore[misc]
+            features = extract(x, policy.pi_features_extractor)
+            return policy.action_net(policy.mlp_extractor.forward_actor(features))
         if hasattr(policy, "get_distribution"):
             dist = policy.get_distribution(x).distribution
             if not hasattr(dist, "mean") or not hasattr(dist, "stddev"):
