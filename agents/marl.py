@@ -110,6 +110,9 @@ class TeamPPOConfig:
     """Normalized observations (and scaled rewards) are clipped to ±this."""
     log_std_init: float = 0.0
     """Initial log standard deviation of every actor's Gaussian."""
+    target_kl: float | None = None
+    """Stop a rollout's epochs early once the policy's mean KL from the rollout's policy (over
+    the whole rollout, any agent) exceeds this (OmniSafe: 0.02 with 40 epochs); None: never."""
 
     def __post_init__(self) -> None:
         for names, ok, expected in _CHECKS:
@@ -123,6 +126,16 @@ class TeamPPOConfig:
                     raise ConfigError(
                         f"{type(self).__name__}.{name} must be {expected}, got {value!r}."
                     )
+        if self.target_kl is not None and not (
+            isinstance(self.target_kl, (int, float))
+            and not isinstance(self.target_kl, bool)
+            and math.isfinite(self.target_kl)
+            and self.target_kl > 0
+        ):
+            raise ConfigError(
+                f"{type(self).__name__}.target_kl must be a number > 0 or None, "
+                f"got {self.target_kl!r}."
+            )
         if not self.net_arch or not all(_positive_int(h) for h in self.net_arch):
             raise ConfigError(
                 f"{type(self).__name__}.net_arch must be a non-empty tuple of positive ints, "
@@ -207,6 +220,8 @@ class TeamLearner:
         self.steps = 0
         """Environment steps trained on (each synchronous step of n views counts n)."""
         self.tensorboard_log = tensorboard_log
+        self.diagnostics: dict[str, float] = {}
+        """The last update's scalars (losses, entropy, epochs run, learning rate, ...)."""
         self._writer: Any = None
         self._seed(seed)
         self.collector = TeamCollector([fn() for fn in env_fns], config, self.rng)
@@ -353,6 +368,7 @@ class TeamLearner:
         }
 
     def _record(self, scalars: Mapping[str, float]) -> None:
+        self.diagnostics = dict(scalars)
         log.debug("%s at %d steps: %s", self.config.algo, self.steps, dict(scalars))
         if self.tensorboard_log is None:
             return

@@ -17,7 +17,7 @@ import torch
 
 from advgame.agents.marl_nets import TeamModel
 
-__all__ = ["Rollout", "TrainData", "gae", "ppo_update"]
+__all__ = ["Rollout", "TrainData", "gae", "kl_exceeded", "ppo_update"]
 
 
 def gae(
@@ -160,6 +160,29 @@ def _loss(
     return loss, parts
 
 
+def kl_exceeded(
+    model: TeamModel,
+    obs: Mapping[str, torch.Tensor],
+    actions: Mapping[str, torch.Tensor],
+    logp: torch.Tensor,
+    target_kl: float | None,
+) -> bool:
+    """Whether any actor has moved more than `target_kl` from the rollout's policy.
+
+    The KL is estimated over the whole rollout as the mean of ``(r - 1) - log r`` (``r`` the
+    probability ratio of the sampled actions; never negative, unbiased for KL(old ‖ new)).
+    """
+    if target_kl is None:
+        return False
+    with torch.no_grad():
+        for i, agent in enumerate(model.agents):
+            new, _ = model.actor(agent).log_prob(obs[agent], actions[agent])
+            log_ratio = new - logp[:, i]
+            if float((log_ratio.exp() - 1 - log_ratio).mean()) > target_kl:
+                return True
+    return False
+
+
 def ppo_update(
     model: TeamModel,
     optimizer: torch.optim.Optimizer,
@@ -172,11 +195,15 @@ def ppo_update(
     Each minibatch updates every actor on its own surrogate (its own advantages) and the
     critic(s) on every agent's value targets; gradients are clipped per network. Returns the
     mean diagnostics: policy and value loss (summed over agents), entropy, approximate KL and
-    clip fraction (averaged over agents).
+    clip fraction (averaged over agents), and the epochs run (fewer than `cfg.n_epochs` when
+    `cfg.target_kl` stopped them).
     """
     n = len(data.logp)
-    total, count = torch.zeros(5), 0
+    total, count, epochs = torch.zeros(5), 0, 0
     for _ in range(cfg.n_epochs):
+        if epochs and kl_exceeded(model, data.obs, data.actions, data.logp, cfg.target_kl):
+            break
+        epochs += 1
         order = torch.randperm(n, generator=generator)
         for start in range(0, n, cfg.batch_size):
             loss, parts = _loss(model, data, order[start : start + cfg.batch_size], cfg)
@@ -186,4 +213,4 @@ def ppo_update(
             optimizer.step()
             total, count = total + parts, count + 1
     names = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction")
-    return dict(zip(names, (total / max(count, 1)).tolist(), strict=True))
+    return {**dict(zip(names, (total / max(count, 1)).tolist(), strict=True)), "epochs": epochs}

@@ -25,7 +25,7 @@ from torch import nn
 
 from advgame.agents.marl_collect import TeamCollector
 from advgame.agents.marl_nets import NumpyMLP, TeamModel, _mlp
-from advgame.agents.marl_ppo import Rollout, TrainData, gae
+from advgame.agents.marl_ppo import Rollout, TrainData, gae, kl_exceeded
 from advgame.training.learning import EpisodeStats
 
 __all__ = ["Direction", "SafeCollector", "SafeModel", "SafeTrainData", "project", "safe_update"]
@@ -192,10 +192,16 @@ def safe_update(
     generator: torch.Generator,
     way: Direction,
 ) -> dict[str, float]:
-    """`cfg.n_epochs` passes of minibatch updates in direction `way`; mean diagnostics."""
+    """`cfg.n_epochs` passes of minibatch updates in direction `way`; mean diagnostics.
+
+    Fewer epochs run when `cfg.target_kl` stops them; the count is in the diagnostics.
+    """
     n = len(data.logp)
-    total, count = torch.zeros(4), 0
+    total, count, epochs = torch.zeros(4), 0, 0
     for _ in range(cfg.n_epochs):
+        if epochs and kl_exceeded(model, data.obs, data.actions, data.logp, cfg.target_kl):
+            break
+        epochs += 1
         order = torch.randperm(n, generator=generator)
         for start in range(0, n, cfg.batch_size):
             idx = order[start : start + cfg.batch_size]
@@ -213,4 +219,4 @@ def safe_update(
             parts = torch.stack([loss_r, loss_c, critics, entropy]).detach()
             total, count = total + parts, count + 1
     names = ("reward_surrogate", "cost_surrogate", "critic_loss", "entropy")
-    return dict(zip(names, (total / max(count, 1)).tolist(), strict=True))
+    return {**dict(zip(names, (total / max(count, 1)).tolist(), strict=True)), "epochs": epochs}

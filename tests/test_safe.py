@@ -373,3 +373,19 @@ def test_advgame_evaluate_reports_cost_under_the_papers_safe_settings(tmp_path: 
     assert "## Safety" in report and "cost ≤ 7)" in report
     for row in table.safety(7.0):
         assert 0.0 <= row["satisfied"] <= 1.0 and 0.0 <= row["cost"] <= 50.0
+
+
+def test_target_kl_stops_the_epochs_early_and_none_runs_them_all() -> None:
+    def epochs(**options: Any) -> float:
+        cfg = PPOLagConfig(n_steps=128, batch_size=64, n_epochs=8, **options)
+        learner = cfg.make_learner([team_factory(REACHER, preset="default")], 0, 256)
+        learner.learn(256)
+        return learner.diagnostics["epochs"]
+
+    assert epochs() == 8
+    assert epochs(target_kl=1e-12) == 1  # the first epoch always runs, then the KL is checked
+    assert 1 <= epochs(target_kl=0.02) <= 8
+    with pytest.raises(ConfigError, match="target_kl"):
+        PPOLagConfig(target_kl=0.0)
+    with pytest.raises(ConfigError, match="target_kl"):
+        learner_config("ippo", {"target_kl": "small"})
