@@ -15,6 +15,15 @@ the threat model, the optimal attack's budget)::
     [train.atla]               # and for one method
     adversary_steps = 2048
 
+A name in ``methods`` may also be a variant of a method: its section says which method it
+varies, and the rest of the section is the variation (a training preset, hyper-parameters)::
+
+    methods = ["crpo", "crpo-noisy"]
+
+    [train.crpo-noisy]
+    method = "crpo"
+    preset = "action-gauss-0.3"
+
     [evaluate]
     adversaries = ["attacks"]  # column specs (advgame.evaluation.columns)
     threat = "atla"
@@ -38,6 +47,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -52,6 +62,11 @@ __all__ = ["Campaign", "campaign_table", "load_campaign", "run_campaign"]
 
 log = logging.getLogger(__name__)
 
+_LABEL = re.compile(r"[a-z0-9][a-z0-9._-]*")
+"""What a campaign's method name may be (it names run folders and zoo entries)."""
+_RUN = re.compile(r".*-s[0-9]+")
+"""A run name's ending; a method name must not have it (``NAME-sSEED`` splits at the last)."""
+
 
 @dataclass(frozen=True)
 class Campaign:
@@ -60,13 +75,15 @@ class Campaign:
     scenario: str
     """Registered scenario id."""
     methods: tuple[str, ...]
-    """Names in `advgame.training.METHODS`."""
+    """Names in `advgame.training.METHODS`, or variants whose `per_method` section names one
+    under ``method``."""
     seeds: tuple[int, ...]
     """Training seeds of every method."""
     train: Mapping[str, Any] = field(default_factory=dict)
     """`TrainConfig` fields for every run."""
     per_method: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
-    """`TrainConfig` fields for the runs of one method (over `train`)."""
+    """`TrainConfig` fields for the runs of one method (over `train`); a variant's also names
+    its ``method``."""
     adversaries: tuple[str, ...] = ("attacks",)
     """Evaluation column specs."""
     threat: str | None = None
@@ -81,11 +98,18 @@ class Campaign:
     def __post_init__(self) -> None:
         from advgame.training import METHODS
 
-        unknown = [m for m in self.methods if m not in METHODS]
+        unknown = [m for m in self.methods if self.base_method(m) not in METHODS]
         if not self.methods or unknown:
             raise ConfigError(
-                f"Campaign methods must be names of advgame.training.METHODS {sorted(METHODS)}, "
-                f"got {list(self.methods)!r}."
+                f"Campaign methods must be names of advgame.training.METHODS {sorted(METHODS)} "
+                f"or variants whose [train.NAME] section names one as `method`, got "
+                f"{list(self.methods)!r}."
+            )
+        odd = [m for m in self.methods if not _LABEL.fullmatch(m) or _RUN.fullmatch(m)]
+        if odd or len(set(self.methods)) != len(self.methods):
+            raise ConfigError(
+                f"Campaign method names must be distinct, lowercase letters, digits, '-', '_' "
+                f"or '.', and not end in -s<digits> (run names do), got {list(self.methods)!r}."
             )
         if not self.seeds or not all(type(s) is int and s >= 0 for s in self.seeds):
             raise ConfigError(f"Campaign seeds must be ints >= 0, got {list(self.seeds)!r}.")
@@ -106,6 +130,10 @@ class Campaign:
         for name in self.runs():  # every TrainConfig is checked before anything runs
             self.config(name)
 
+    def base_method(self, method: str) -> str:
+        """The `advgame.training.METHODS` name `method` trains with (itself, or its variant's)."""
+        return str(self.per_method.get(method, {}).get("method", method))
+
     def runs(self) -> list[str]:
         """Run names, ``METHOD-sSEED``, method by method."""
         return [f"{m}-s{s}" for m in self.methods for s in self.seeds]
@@ -119,7 +147,8 @@ class Campaign:
         from advgame.training import METHODS, TrainConfig
 
         method, _, seed = run.rpartition("-s")
-        fields = {**METHODS[method], **self.train, **self.per_method.get(method, {})}
+        own = {k: v for k, v in self.per_method.get(method, {}).items() if k != "method"}
+        fields = {**METHODS[self.base_method(method)], **self.train, **own}
         try:
             return TrainConfig(scenario=self.scenario, seed=int(seed), **fields)
         except TypeError as exc:

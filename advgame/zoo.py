@@ -59,7 +59,7 @@ class ZooEntry:
     """One released agent (a manifest entry)."""
 
     id: str
-    """``ENV/METHOD``, e.g. ``"hopper/ppo"``."""
+    """``ENV/NAME``, e.g. ``"hopper/ppo"`` (NAME: the campaign's method, or its variant's name)."""
     scenario: str
     """The scenario it was trained and evaluated on."""
     method: str
@@ -241,7 +241,8 @@ def release_campaign(
             algo = spec.algo
         sources.update(_strongest_adversary(run, optimal.get(row["median_agent"], {})))
         entry = ZooEntry(
-            id=f"{env}/{row['method']}", scenario=campaign.scenario, method=row["method"],
+            id=f"{env}/{row['method']}", scenario=campaign.scenario,
+            method=campaign.base_method(row["method"]),
             steps=cfg.protagonist_steps * cfg.iterations + cfg.warmup_steps, seed=cfg.seed,
             natural_return=float(row["natural"]), worst_attack_return=float(row["worst"]),
             worst_attack=row["worst_attack"], threat=campaign.threat or "default",

@@ -99,10 +99,42 @@ def test_bad_campaign_files_are_clear_errors(tmp_path: Path) -> None:
         ('methods = ["ppo"]\nscenario = "Hopper-v5"\nseeds = [-1]', "seeds"),
         ("methods = [", "not valid TOML"),
         ('methods = ["ppo"]\nscenario = "Hopper-v5"\nextra = 1', "unknown keys"),
+        ('methods = ["noisy"]\nscenario = "Hopper-v5"\n[train.noisy]\nmethod = "nope"', "variants"),
+        (
+            'methods = ["ppo-s1"]\nscenario = "Hopper-v5"\n[train.ppo-s1]\nmethod = "ppo"',
+            "-s<digits>",
+        ),
+        ('methods = ["ppo", "ppo"]\nscenario = "Hopper-v5"', "distinct"),
     ]:
         bad.write_text(text)
         with pytest.raises(ConfigError, match=words):
             load_campaign(bad)
+
+
+def test_a_variant_trains_as_its_method_with_its_own_fields(tmp_path: Path) -> None:
+    path = tmp_path / "variants.toml"
+    path.write_text(
+        'scenario = "SafetyHopper-v5"\nmethods = ["crpo", "crpo-noisy"]\nseeds = [0, 1]\n'
+        "[train]\niterations = 3\n"
+        '[train.crpo-noisy]\nmethod = "crpo"\npreset = "action-gauss-0.3"\n'
+    )
+    campaign = load_campaign(path)
+    assert campaign.method_runs("crpo") == ["crpo-s0", "crpo-s1"]
+    assert campaign.method_runs("crpo-noisy") == ["crpo-noisy-s0", "crpo-noisy-s1"]
+    plain, noisy = campaign.config("crpo-s1"), campaign.config("crpo-noisy-s1")
+    assert noisy.protagonist_algo == plain.protagonist_algo == "crpo"
+    assert (plain.preset, noisy.preset) == ("default", "action-gauss-0.3")
+    assert noisy.iterations == 3 and noisy.seed == 1
+    assert campaign.base_method("crpo-noisy") == "crpo"
+
+
+def test_the_campaign_file_in_the_docs_loads(tmp_path: Path) -> None:
+    text = (Path(__file__).parent.parent / "docs" / "zoo.md").read_text()
+    block = text.split("```toml\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "doc.toml").write_text(block)
+    campaign = load_campaign(tmp_path / "doc.toml")
+    assert campaign.base_method("atla-wide") == "atla"
+    assert campaign.config("atla-wide-s0").train_budget_scale == 2.0
 
 
 def test_the_zoo_campaign_files_load() -> None:
