@@ -1,4 +1,4 @@
-"""Adversary policies: noise, scheduled shifts, white-box attacks (MAD, critic, PGD, Robust Sarsa), LLMs.
+"""Adversary policies: noise, scheduled shifts, white-box attacks (MAD, critic, PGD, Robust Sarsa, max-cost), LLMs.
 
 Every adversary here is a frozen, picklable *spec* with ``build(info) -> Policy``; the built
 policy speaks the one `advgame.core.policy.Policy` interface (``reset(seed)``, ``act(obs)``), so
@@ -19,7 +19,7 @@ from advgame.adversaries.noise import (
     UniformAdversary,
     ZeroAdversary,
 )
-from advgame.adversaries.robust_sarsa import RobustSarsaAttack
+from advgame.adversaries.robust_sarsa import MaxCostAttack, RobustSarsaAttack
 from advgame.adversaries.scheduled import ConstantAdversary, SinusoidAdversary
 from advgame.adversaries.whitebox import CriticAttack, MADAttack, PGDAttack
 
@@ -47,6 +47,7 @@ __all__ = [
     "LLMAdversary",
     "LocalModel",
     "MADAttack",
+    "MaxCostAttack",
     "OpenAIEndpoint",
     "PGDAttack",
     "RandomAdversary",

@@ -32,7 +32,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -45,7 +45,7 @@ if TYPE_CHECKING:
 
     from advgame.core.game import Game
 
-__all__ = ["RobustSarsaAttack", "default_cache_dir"]
+__all__ = ["MaxCostAttack", "RobustSarsaAttack", "default_cache_dir"]
 
 log = logging.getLogger(__name__)
 _CRITICS: dict[str, Any] = {}
@@ -116,6 +116,9 @@ class RobustSarsaAttack(_Attack):
                 f"RobustSarsaAttack.hidden must be positive ints, got {self.hidden!r}."
             )
 
+    signal: ClassVar[str] = "reward"
+    """What the learned ``Q`` sums: the reward (RS) or the true cost (`MaxCostAttack`)."""
+
     # -- the attack ----------------------------------------------------------------------
     def row_objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
         """Per row, minus the learned ``Q^π(s, π(s + δ))``."""
@@ -141,6 +144,7 @@ class RobustSarsaAttack(_Attack):
             std = victim.action_std()
         parts.append(b"" if std is None else std.numpy().tobytes())
         settings = repr(sorted((k, v) for k, v in asdict(self).items() if k in _FIT_FIELDS))
+        settings += "|cost" if self.signal == "cost" else ""
         text = f"{game.scenario_id}|{target}|{settings}|".encode() + b"|".join(parts)
         key = hashlib.sha256(text).hexdigest()[:24]
         _mark(victim, key)
@@ -150,15 +154,46 @@ class RobustSarsaAttack(_Attack):
             if path.is_file():
                 _CRITICS[key] = QNetwork.load(path)
             else:
-                log.info("Robust Sarsa: learning Q^pi of %r (%d steps)", target, self.samples)
+                log.info(
+                    "%s: learning Q^pi of %r's %s (%d steps)",
+                    type(self).__name__, target, self.signal, self.samples,
+                )  # fmt: skip
                 fields = {k: v for k, v in asdict(self).items() if k in _FIT_FIELDS}
-                _CRITICS[key] = fit_sarsa(game.scenario_id, target, victim, **fields)
+                _CRITICS[key] = fit_sarsa(
+                    game.scenario_id, target, victim, signal=self.signal, **fields
+                )
                 _CRITICS[key].save(path)
         return _CRITICS[key]
 
 
 _FIT_FIELDS: tuple[str, ...] = ("samples", "epochs", "batch_size", "hidden", "gamma", "lr")
 _FIT_FIELDS += ("reg", "reg_eps", "reg_steps", "seed")
+
+
+@dataclass(frozen=True, kw_only=True)
+class MaxCostAttack(RobustSarsaAttack):
+    """Maximise a learned cost ``Q_c^π(s, π(s + δ))`` of the frozen protagonist (safe scenarios).
+
+    The maximum-cost (MC) attack of Liu et al. 2023 ("On the Robustness of Safe Reinforcement
+    Learning under Observational Perturbations"): the perturbation that steers the policy to the
+    action its cost critic values most, i.e. into the constraint, where reward-minimising
+    attacks aim at the return. Liu et al. read the victim's own ``Q_c`` (an off-policy safe
+    learner has one); advgame's constrained learners keep a state cost value only, so ``Q_c^π``
+    is learned here as Robust Sarsa learns ``Q^π`` (the same settings and cache), on the true
+    cost of the nominal game.
+
+    Example:
+        >>> MaxCostAttack(samples=20_000).signal
+        'cost'
+
+    """
+
+    signal: ClassVar[str] = "cost"
+
+    def row_objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
+        """Per row, the learned ``Q_c^π(s, π(s + δ))``."""
+        critic = _CRITICS[_key_of(victim)]
+        return critic(clean, victim.action_mean(attacked))
 
 
 class _RobustSarsaPolicy(WhiteBoxAttackPolicy):
@@ -177,6 +212,11 @@ class _RobustSarsaPolicy(WhiteBoxAttackPolicy):
             raise ConfigError(
                 "RobustSarsaAttack learns Q^pi in the game's registered scenario; make the game "
                 "with advgame.make(...)."
+            )
+        if self.spec.signal == "cost" and not getattr(game.task, "has_cost", False):
+            raise ConfigError(
+                f"MaxCostAttack maximises a learned cost, but {game.scenario_id} computes no "
+                "cost; use it on a safe scenario (advgame.list_scenarios(family='safe'))."
             )
         super().attach(game, victims)
         for target, victim in self.victims.items():

@@ -109,6 +109,7 @@ def collect(
     act_l: list[np.ndarray] = []
     next_l: list[np.ndarray] = []
     rew_l: list[float] = []
+    cost_l: list[float] = []
     done_l: list[bool] = []
     episode = 0
     try:
@@ -122,6 +123,7 @@ def collect(
             obs_l.append(obs)
             act_l.append(mean)
             rew_l.append(move.reward)
+            cost_l.append(move.cost)
             done_l.append(move.terminated)
             if move.terminated or move.truncated:
                 episode += 1
@@ -137,6 +139,7 @@ def collect(
         "obs": np.asarray(obs_l),
         "act": np.asarray(act_l, dtype=np.float32),
         "rew": np.asarray(rew_l, dtype=np.float32),
+        "cost": np.asarray(cost_l, dtype=np.float32),
         "done": np.asarray(done_l, dtype=np.float32),
         "next": np.asarray(next_l),
         "act_range": np.asarray((space.high - space.low) / 2, dtype=np.float32),
@@ -158,8 +161,13 @@ def fit_sarsa(
     reg_eps: float,
     reg_steps: int,
     seed: int,
+    signal: str = "reward",
 ) -> QNetwork:
-    """Learn ``Q^π`` of `victim` on `scenario` by robust Sarsa; return the network."""
+    """Learn ``Q^π`` of `victim` on `scenario` by robust Sarsa; return the network.
+
+    `signal` is what ``Q`` sums: ``"reward"`` (the protagonist's reward) or ``"cost"`` (the true
+    cost of a safe scenario: ``Q_c^π``).
+    """
     import torch
 
     torch.manual_seed(seed)
@@ -167,6 +175,9 @@ def fit_sarsa(
     with torch.no_grad():  # the successor's action, as the policy takes it
         next_act = victim.action_mean(torch.as_tensor(data["next"])).numpy()
     act_range = data.pop("act_range")
+    cost = data.pop("cost")
+    if signal == "cost":  # Q_c^π: the same Sarsa fit on the true cost
+        data["rew"] = cost
     stats = _stats(data)
     q = QNetwork(data["obs"].shape[1], data["act"].shape[1], hidden, stats)
     target = QNetwork(data["obs"].shape[1], data["act"].shape[1], hidden, stats)

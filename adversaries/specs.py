@@ -14,6 +14,8 @@ text            spec                                              argument
 ``mad``         `MADAttack` (white-box)
 ``critic``      `CriticAttack` (white-box)
 ``rs``          `RobustSarsaAttack` (white-box, learned critic)
+``max-cost``    `MaxCostAttack` (white-box, learned cost critic;
+                safe scenarios)
 ``llm``         `LLMAdversary` (the offline local model; a dict
                 may give ``backend``: ``{"kind": "openai", ...}``)
 ==============  ================================================  ======================
@@ -28,7 +30,7 @@ from advgame.errors import AdvgameError, ConfigError, UnknownNameError, did_you_
 
 __all__ = ["KINDS", "adversary_spec"]
 
-KINDS = ("zero", "random", "gauss", "uniform", "constant", "mad", "critic", "rs", "llm")
+KINDS = ("zero", "random", "gauss", "uniform", "constant", "mad", "critic", "rs", "max-cost", "llm")
 """The kind names `adversary_spec` knows."""
 
 
@@ -38,7 +40,8 @@ def _classes() -> dict[str, Any]:
     return {
         "zero": a.ZeroAdversary, "random": a.RandomAdversary, "gauss": a.GaussianAdversary,
         "uniform": a.UniformAdversary, "constant": a.ConstantAdversary, "mad": a.MADAttack,
-        "critic": a.CriticAttack, "rs": a.RobustSarsaAttack, "llm": a.LLMAdversary,
+        "critic": a.CriticAttack, "rs": a.RobustSarsaAttack, "max-cost": a.MaxCostAttack,
+        "llm": a.LLMAdversary,
     }  # fmt: skip
 
 

@@ -16,6 +16,8 @@ named `AdversarySetup`s (``nominal`` always first, the metrics are relative to i
                                  own networks (`advgame.adversaries.whitebox`); ``rs`` is Robust
                                  Sarsa (`advgame.adversaries.robust_sarsa`; options samples=N,
                                  epochs=N for its critic)
+    attack:max-cost              safe scenarios: Liu et al.'s maximum-cost attack, towards the
+                                 action a learned cost critic values most (options as rs)
     attacks                      the worst-of-attacks suite: attack:random, attack:mad,
                                  attack:critic (skipped for teams: their actors have no critic),
                                  attack:rs and every evaluated run's learned adversaries
@@ -154,7 +156,9 @@ def _population(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[s
 OPTIONS = ("last", "sample", "preset", "samples", "epochs")
 """The ``KEY=VALUE`` options a column spec may carry."""
 ATTACKS = ("random", "mad", "critic", "rs")
-"""The attacks of the ``attack:`` kind, and of the ``attacks`` suite (in this order)."""
+"""The attacks of the ``attacks`` suite (in this order)."""
+ATTACK_KINDS = (*ATTACKS, "max-cost")
+"""The attacks of the ``attack:`` kind: the suite's and the safe-RL max-cost attack."""
 
 
 def default_threat(scenario: str) -> str:
@@ -165,17 +169,25 @@ def default_threat(scenario: str) -> str:
 
 
 def _attack(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, AdversarySetup]:
-    from advgame.adversaries import CriticAttack, MADAttack, RandomAdversary, RobustSarsaAttack
+    from advgame.adversaries import (
+        CriticAttack,
+        MADAttack,
+        MaxCostAttack,
+        RandomAdversary,
+        RobustSarsaAttack,
+    )
 
-    if arg not in ATTACKS:
-        hint = did_you_mean(arg, ATTACKS)
+    if arg not in ATTACK_KINDS:
+        hint = did_you_mean(arg, ATTACK_KINDS)
         raise UnknownNameError(
-            f"Unknown attack {arg!r}.{hint} Attacks: attack:{', attack:'.join(ATTACKS)}."
+            f"Unknown attack {arg!r}.{hint} Attacks: attack:{', attack:'.join(ATTACK_KINDS)}."
         )
     preset = opts.get("preset") or ctx.threat or default_threat(ctx.scenario)
     agent = observation_agent(ctx.scenario, preset)
     kinds = {"mad": MADAttack, "critic": CriticAttack, "rs": RobustSarsaAttack}
-    options = {k: _count(opts, k, None) for k in ("samples", "epochs") if arg == "rs" and k in opts}
+    kinds["max-cost"] = MaxCostAttack
+    learned = arg in ("rs", "max-cost")
+    options = {k: _count(opts, k, None) for k in ("samples", "epochs") if learned and k in opts}
     spec = RandomAdversary() if arg == "random" else kinds[arg](**options)
     return {f"attack {arg}": AdversarySetup({"preset": preset}, {agent: spec})}
 
