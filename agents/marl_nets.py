@@ -194,12 +194,45 @@ class NumpyMLP:
                 self.layers.append(None)
             else:
                 raise TypeError(f"NumpyMLP copies Linear and Tanh layers only, not {module}.")
+        self._row_invariant: bool | None = None
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """The network's output for a float32 batch ``[batch, in]``."""
         for layer in self.layers:
             x = np.tanh(x) if layer is None else x @ layer[0] + layer[1]
         return x
+
+    def rows(self, x: np.ndarray) -> np.ndarray | None:
+        """The output of each row of ``[batch, in]`` exactly as `__call__` gives it alone.
+
+        Each linear layer runs as a stack of one-row products (``[batch, 1, in] @ W``), the
+        shape a lone row has; None if a probe (once per network) finds numpy's stacked product
+        differs from the lone one in any bit here, and the caller goes row by row.
+        """
+        return self._stacked(x) if self.row_invariant else None
+
+    @property
+    def row_invariant(self) -> bool:
+        """Whether `rows` reproduces lone rows here (probed once)."""
+        if self._row_invariant is None:
+            self._row_invariant = self._probe()
+        return self._row_invariant
+
+    def _stacked(self, x: np.ndarray) -> np.ndarray:
+        h = x[:, None, :]
+        for layer in self.layers:
+            h = np.tanh(h) if layer is None else np.matmul(h, layer[0]) + layer[1]
+        return h[:, 0, :]
+
+    def _probe(self) -> bool:
+        rng = np.random.default_rng(0)
+        width = next(w.shape[0] for w in (lay[0] for lay in self.layers if lay is not None))
+        for n in (2, 3, 8, 33):
+            x = rng.normal(size=(n, width)).astype(np.float32)
+            alone = np.concatenate([self(x[i : i + 1]) for i in range(n)])
+            if not np.array_equal(self._stacked(x), alone):
+                return False
+        return True
 
 
 class TeamSnapshot:
@@ -326,11 +359,32 @@ class TorchActorPolicy:
         self.low, self.high = record["low"].numpy(), record["high"].numpy()
         self.deterministic = deterministic
         self._rng = np.random.default_rng(0)
+        self._record = record  # kept alive: its id is the batch key's
 
     def reset(self, seed: int | None = None) -> None:
         """Reseed the action sampling (a stochastic policy's only randomness)."""
         if seed is not None:
             self._rng = np.random.default_rng(seed)
+
+    @property
+    def batch_key(self) -> tuple | None:
+        """Equal for deterministic policies of one loaded actor (`act_batch` serves them all).
+
+        None for a sampling policy (each game draws from its own generator) or where the
+        stacked forward pass does not reproduce lone rows (`NumpyMLP.rows`).
+        """
+        if not self.deterministic or not self.mean.row_invariant:
+            return None
+        return ("torch-actor", id(self._record))
+
+    def act_batch(self, observations: Any) -> np.ndarray:
+        """`act` of every row of ``[batch, obs]``, row for row what `act` gives it alone."""
+        obs = np.asarray(observations, dtype=np.float64)
+        x = self.norm.normalize(obs) if self.norm is not None else obs.astype(np.float32)
+        action = self.mean.rows(x)
+        if action is None or not self.deterministic:
+            return np.stack([self.act(o) for o in observations])
+        return np.clip(action, self.low, self.high).astype(np.float32)
 
     def act(self, observation: Any) -> np.ndarray:
         """The action for one raw observation."""

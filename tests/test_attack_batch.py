@@ -58,3 +58,44 @@ def test_batched_attacks_give_every_game_its_own_rows(
     assert max(sizes) == 1  # one game at a time
     assert _rows(batched.rows) == _rows(alone)
     assert all(r["clipped"] == 0 for r in batched.rows)  # in the budget by construction
+
+
+def test_saved_team_actors_act_and_are_attacked_in_batches(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A constrained learner's saved actor (MAPPO/IPPO format): lockstep rows = lone rows."""
+    import numpy as np
+
+    from advgame import zoo
+
+    actors = zoo.load("safetyhopper/pcrpo")
+    policy = actors["protagonist"].build(_info("SafetyHopper-v5"))
+    obs = np.random.default_rng(0).normal(size=(9, 11)) * 3
+    assert policy.batch_key is not None
+    assert np.array_equal(policy.act_batch(obs), np.stack([policy.act(o) for o in obs]))
+    setups = {
+        "nominal": AdversarySetup.nominal(),
+        "mad": AdversarySetup({"preset": "default"}, {OBS: MADAttack(steps=3)}),
+    }
+    jobs = population_jobs("SafetyHopper-v5", {"pcrpo": actors}, setups, seeds=(0, 1, 2))
+    sizes: list[int] = []
+    group = WhiteBoxAttackPolicy.act_group
+
+    def spy(policies: Any, observations: Any) -> Any:
+        sizes.append(len(policies))
+        return group(policies, observations)
+
+    monkeypatch.setattr(WhiteBoxAttackPolicy, "act_group", staticmethod(spy))
+    batched = evaluate(jobs, progress=False)
+    assert max(sizes) == 3  # the three games' attacks in one walk
+    alone = [row for unit in split_seeds(jobs, 1) for row in run_job(unit)]
+    assert _rows(batched.rows) == _rows(alone)
+
+
+def _info(scenario: str) -> Any:
+    import advgame
+
+    game = advgame.make(scenario, preset="default")
+    info = game.agent_info("protagonist")
+    game.close()
+    return info
