@@ -24,10 +24,12 @@ def test_the_attack_reads_the_live_learner_and_collection_leaves_it_unchanged(
 ) -> None:
     torch.set_num_threads(1)
     seen: list[Any] = []
+    rows: list[int] = []
     scorer = MADAttack.row_scorer  # what each walk of the attack scores its iterates with
 
     def spy(self: MADAttack, victim: Any, clean: Any) -> Any:
         seen.append(victim.model)
+        rows.append(len(clean))
         return scorer(self, victim, clean)
 
     monkeypatch.setattr(MADAttack, "row_scorer", spy)
@@ -45,6 +47,9 @@ def test_the_attack_reads_the_live_learner_and_collection_leaves_it_unchanged(
     side.model.train = checked_train
     side.learn(64 * 2)
     assert seen and all(m is side.model for m in seen)  # the current policy, not a copy
+    # the two views bound to one learner are attacked in one walk (alone only where their
+    # episodes are out of step, e.g. one just reset)
+    assert rows.count(2) > rows.count(1)
     assert all(torch.equal(a, b) for a, b in zip(before, at_update[0], strict=True))
     after = [p.detach() for p in side.model.policy.parameters()]
     assert any(not torch.equal(a, b) for a, b in zip(before, after, strict=True))  # PPO updated

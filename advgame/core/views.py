@@ -18,6 +18,7 @@ import numpy as np
 
 from advgame.core.episodes import build_policies, reseed_policies
 from advgame.core.game import Game, Move
+from advgame.core.policy import gaussian_mean
 from advgame.errors import ConfigError
 
 __all__ = ["SingleAgentView", "view_factory"]
@@ -271,7 +272,8 @@ class _Placeholder:
                 "An attack on the learner played before the learner was bound; train through "
                 "advgame's loop (Side binds it), or call view.bind_learner(model, venv)."
             )
-        self.model.policy.set_training_mode(False)
+        if self.model.policy.training:
+            self.model.policy.set_training_mode(False)
         rms = getattr(self.normalizer, "obs_rms", None)
         if rms is None or not getattr(self.normalizer, "norm_obs", True):
             return obs
@@ -280,10 +282,18 @@ class _Placeholder:
         clip = float(self.normalizer.clip_obs)
         return ((obs - mean) / std).clamp(-clip, clip)
 
+    @property
+    def batch_key(self) -> tuple | None:
+        """Equal for the stand-ins of views bound to one learner: their attacks walk as one."""
+        if self.model is None:
+            return None
+        return ("live-learner", id(self.model), id(self.normalizer))
+
     def action_mean(self, obs: Any) -> Any:
         """The learner's current mean action (a Gaussian policy's mean)."""
-        dist = self.model_policy().get_distribution(self._policy_input(obs)).distribution
-        return dist.mean
+        policy, x = self.model_policy(), self._policy_input(obs)
+        mean = gaussian_mean(policy, x)
+        return policy.get_distribution(x).distribution.mean if mean is None else mean
 
     def action_std(self) -> Any:
         """The learner's current state-independent action std."""

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from advgame.core.files import reading
-from advgame.core.policy import AgentInfo
+from advgame.core.policy import AgentInfo, gaussian_mean
 from advgame.errors import ConfigError, FileFormatError
 
 __all__ = ["ALGOS", "Normalizer", "SB3Checkpoint", "SB3Policy", "load_model", "load_normalizer"]
@@ -119,25 +119,6 @@ def _vecnormalize_stats(path: str) -> Normalizer | None:
     if not getattr(norm, "norm_obs", True):
         return None
     return Normalizer(rms.mean, rms.var, float(norm.clip_obs), float(norm.epsilon))
-
-
-def _plain_gaussian(policy: Any) -> bool:
-    """Whether `policy` is SB3's own `ActorCriticPolicy` with a plain diagonal Gaussian.
-
-    Then the Gaussian's mean is ``action_net(forward_actor(features))``, exactly what
-    ``get_distribution(obs).distribution.mean`` computes; anything overriding those steps (or
-    another distribution) goes through ``get_distribution``.
-    """
-    from stable_baselines3.common.distributions import DiagGaussianDistribution
-    from stable_baselines3.common.policies import ActorCriticPolicy
-
-    kind = type(policy)
-    return (
-        isinstance(policy, ActorCriticPolicy)
-        and kind.get_distribution is ActorCriticPolicy.get_distribution
-        and kind._get_action_dist_from_latent is ActorCriticPolicy._get_action_dist_from_latent
-        and type(policy.action_dist) is DiagGaussianDistribution
-    )
 
 
 class SB3Policy:
@@ -303,12 +284,9 @@ class SB3Policy:
     def action_mean(self, obs: Any) -> Any:
         """The mean action (PPO: the Gaussian's mean; SAC/TD3: the deterministic actor's)."""
         policy, x = self.model.policy, self._features(obs)
-        if _plain_gaussian(policy):  # get_distribution's mean, without building the distribution
-            from stable_baselines3.common.policies import ActorCriticPolicy
-
-            extract = super(ActorCriticPolicy, policy).extract_features  # type: ignore[misc]
-            features = extract(x, policy.pi_features_extractor)
-            return policy.action_net(policy.mlp_extractor.forward_actor(features))
+        mean = gaussian_mean(policy, x)
+        if mean is not None:
+            return mean
         if hasattr(policy, "get_distribution"):
             dist = policy.get_distribution(x).distribution
             if not hasattr(dist, "mean") or not hasattr(dist, "stddev"):
