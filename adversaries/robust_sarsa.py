@@ -121,9 +121,9 @@ class RobustSarsaAttack(_Attack):
 
     # -- the attack ----------------------------------------------------------------------
     def row_objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
-        """Per row, minus the learned ``Q^π(s, π(s + δ))``."""
-        critic = _CRITICS[_key_of(victim)]
-        return -critic(clean, victim.action_mean(attacked))
+        """Per row, minus the learned ``Q^π(s, π(s + δ))`` (plus ``Q_c^π`` for the cost)."""
+        q = _CRITICS[_key_of(victim)](clean, victim.action_mean(attacked))
+        return q if self.signal == "cost" else -q
 
     def build(self, info: Any) -> WhiteBoxAttackPolicy:
         """The attack for observation adversary `info.agent`; it learns ``Q^π`` when attached."""
@@ -189,11 +189,6 @@ class MaxCostAttack(RobustSarsaAttack):
     """
 
     signal: ClassVar[str] = "cost"
-
-    def row_objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
-        """Per row, the learned ``Q_c^π(s, π(s + δ))``."""
-        critic = _CRITICS[_key_of(victim)]
-        return critic(clean, victim.action_mean(attacked))
 
 
 class _RobustSarsaPolicy(WhiteBoxAttackPolicy):

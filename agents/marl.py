@@ -66,6 +66,11 @@ _CHECKS: tuple[tuple[tuple[str, ...], Callable[[Any], Any], str], ...] = (
     (("gamma", "gae_lambda"), lambda v: 0 <= v <= 1, "in [0, 1]"),
     (("vf_coef", "ent_coef"), lambda v: v >= 0, ">= 0"),
     (("log_std_init",), math.isfinite, "finite"),
+    (
+        ("target_kl",),
+        lambda v: v is None or (not isinstance(v, bool) and math.isfinite(v) and v > 0),
+        "a number > 0 or None",
+    ),
 )
 """Config validation: (fields, predicate, what is expected)."""
 
@@ -126,16 +131,6 @@ class TeamPPOConfig:
                     raise ConfigError(
                         f"{type(self).__name__}.{name} must be {expected}, got {value!r}."
                     )
-        if self.target_kl is not None and not (
-            isinstance(self.target_kl, (int, float))
-            and not isinstance(self.target_kl, bool)
-            and math.isfinite(self.target_kl)
-            and self.target_kl > 0
-        ):
-            raise ConfigError(
-                f"{type(self).__name__}.target_kl must be a number > 0 or None, "
-                f"got {self.target_kl!r}."
-            )
         if not self.net_arch or not all(_positive_int(h) for h in self.net_arch):
             raise ConfigError(
                 f"{type(self).__name__}.net_arch must be a non-empty tuple of positive ints, "

@@ -38,11 +38,8 @@ def _rows(rows: list[dict[str, Any]]) -> list[tuple]:
     return sorted(tuple(r[k] for k in keys) for r in rows)
 
 
-def test_batched_attacks_give_every_game_its_own_rows(
-    pendulum_ppo: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    prots = {"ppo": sb3_protagonist(pendulum_ppo, raw_observations=True)}
-    jobs = population_jobs("InvertedPendulum-v5", prots, _setups(tmp_path), seeds=(0, 1, 2, 3))
+def _walk_sizes(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """From now on, the number of games each attack walk serves, in order."""
     sizes: list[int] = []
     group = WhiteBoxAttackPolicy.act_group
 
@@ -51,6 +48,15 @@ def test_batched_attacks_give_every_game_its_own_rows(
         return group(policies, observations)
 
     monkeypatch.setattr(WhiteBoxAttackPolicy, "act_group", staticmethod(spy))
+    return sizes
+
+
+def test_batched_attacks_give_every_game_its_own_rows(
+    pendulum_ppo: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    prots = {"ppo": sb3_protagonist(pendulum_ppo, raw_observations=True)}
+    jobs = population_jobs("InvertedPendulum-v5", prots, _setups(tmp_path), seeds=(0, 1, 2, 3))
+    sizes = _walk_sizes(monkeypatch)
     batched = evaluate(jobs, progress=False)  # one process: jobs in lockstep groups
     assert max(sizes) >= 4  # the games of a group were attacked in one walk
     sizes.clear()
@@ -78,14 +84,7 @@ def test_saved_team_actors_act_and_are_attacked_in_batches(
         "mad": AdversarySetup({"preset": "default"}, {OBS: MADAttack(steps=3)}),
     }
     jobs = population_jobs("SafetyHopper-v5", {"pcrpo": actors}, setups, seeds=(0, 1, 2))
-    sizes: list[int] = []
-    group = WhiteBoxAttackPolicy.act_group
-
-    def spy(policies: Any, observations: Any) -> Any:
-        sizes.append(len(policies))
-        return group(policies, observations)
-
-    monkeypatch.setattr(WhiteBoxAttackPolicy, "act_group", staticmethod(spy))
+    sizes = _walk_sizes(monkeypatch)
     batched = evaluate(jobs, progress=False)
     assert max(sizes) == 3  # the three games' attacks in one walk
     alone = [row for unit in split_seeds(jobs, 1) for row in run_job(unit)]

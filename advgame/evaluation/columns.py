@@ -184,8 +184,10 @@ def _attack(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, 
         )
     preset = opts.get("preset") or ctx.threat or default_threat(ctx.scenario)
     agent = observation_agent(ctx.scenario, preset)
-    kinds = {"mad": MADAttack, "critic": CriticAttack, "rs": RobustSarsaAttack}
-    kinds["max-cost"] = MaxCostAttack
+    kinds = {
+        "mad": MADAttack, "critic": CriticAttack, "rs": RobustSarsaAttack,
+        "max-cost": MaxCostAttack,
+    }  # fmt: skip
     learned = arg in ("rs", "max-cost")
     options = {k: _count(opts, k, None) for k in ("samples", "epochs") if learned and k in opts}
     spec = RandomAdversary() if arg == "random" else kinds[arg](**options)
