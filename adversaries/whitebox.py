@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from advgame.core.numpy_net import NumpyNet
 from advgame.core.policy import AgentInfo, WhiteBox
 from advgame.disruptors.observation import ObservationRuntime
 from advgame.errors import ConfigError
@@ -48,6 +49,18 @@ _RADIUS = 1.0 - 1e-6
 
 Objective = Callable[[WhiteBox, "torch.Tensor", "torch.Tensor"], "torch.Tensor"]
 """``(victim, true observations [1, n], perturbed observations [1, n]) -> scalar to maximise``."""
+
+NumpyScorer = Callable[[np.ndarray], tuple[np.ndarray, Callable[[], np.ndarray]]]
+"""Attacked rows ``[N, n]`` -> (the objective per row ``[N]``, a function giving its gradient)."""
+
+Walk = Callable[[np.ndarray], tuple[np.ndarray, Callable[[], np.ndarray]]]
+"""The adversary's actions ``[N, k]`` -> (objective per row, float64; its gradient in them)."""
+
+
+def _numpy_net(victim: Any, head: str) -> NumpyNet | None:
+    """The victim's `numpy_net(head)` (see `WhiteBox`), or None where it has none."""
+    numpy_net = getattr(victim, "numpy_net", None)
+    return None if numpy_net is None else numpy_net(head)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -99,6 +112,14 @@ class _Attack:
         that depends on the clean rows alone (MAD's reference action) does it here, once.
         """
         return lambda attacked: self.row_objective(victim, clean, attacked)
+
+    def numpy_scorer(self, victim: WhiteBox, clean: np.ndarray) -> NumpyScorer | None:
+        """`row_scorer` in NumPy, where the victim's networks have a `NumpyNet`; else None.
+
+        The scorer maps attacked rows (float32 ``[N, obs]``) to the objective per row and a
+        function giving its gradient in those rows; the walk then needs no torch at all.
+        """
+        return None
 
     def objective(self, victim: WhiteBox, clean: torch.Tensor, attacked: torch.Tensor) -> Any:
         """What the attack maximises over the batch (a scalar tensor: the rows' sum)."""
@@ -166,6 +187,24 @@ class MADAttack(_Attack):
 
         return score
 
+    def numpy_scorer(self, victim: WhiteBox, clean: np.ndarray) -> NumpyScorer | None:
+        """The KL (or squared distance) and its gradient through the victim's `NumpyNet`."""
+        net = _numpy_net(victim, "mean")
+        if net is None:
+            return None
+        reference = net.forward(clean)[0]
+        std = victim.action_std()
+        two_var = None if std is None else (2.0 * std * std).numpy()  # as torch's path has it
+
+        def score(attacked: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
+            mean, tape = net.forward(attacked)
+            diff = mean - reference
+            if two_var is None:
+                return (diff * diff).sum(-1), lambda: net.backward(tape, 2 * diff)
+            return (diff * diff / two_var).sum(-1), lambda: net.backward(tape, 2 * diff / two_var)
+
+        return score
+
 
 @dataclass(frozen=True, kw_only=True)
 class CriticAttack(_Attack):
@@ -183,6 +222,18 @@ class CriticAttack(_Attack):
         if q is not None:
             return -q
         return -victim.value(attacked)
+
+    def numpy_scorer(self, victim: WhiteBox, clean: np.ndarray) -> NumpyScorer | None:
+        """Minus ``V`` through the victim's value `NumpyNet` (a policy without a Q critic)."""
+        net = _numpy_net(victim, "value")
+        if net is None:
+            return None
+
+        def score(attacked: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
+            value, tape = net.forward(attacked)
+            return -value[:, 0], lambda: net.backward(tape, np.full_like(value, -1))
+
+        return score
 
     def check_victim(self, agent: str, victim: WhiteBox, probe: torch.Tensor) -> None:
         """The victim must have a critic (SB3 policies do; MAPPO/IPPO actor files do not)."""
@@ -328,15 +379,13 @@ class WhiteBoxAttackPolicy:
             u_t = torch.as_tensor(np.asarray(u, dtype=np.float32).reshape(1, -1))
             return float(self.spec.objective(self.victims[target], clean, perturb(u_t)).detach())
 
-    def _problem(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> tuple[Any, Any]:
-        """The clean observation rows ``[N, n]`` of `target` in each game, and ``u -> perturbed``.
+    def _rows(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> tuple[Any, ...]:
+        """What every walk on `target` needs, for the games of `policies`, in float32 NumPy.
 
-        ``u`` (``[N, k]``) is `target`'s block of each adversary action, scaled by that game's
-        block of its disruptor's budget (current ε ⊙ normalizer scale). The perturbed
-        observations are clipped into the observation space, as the game clips them.
+        The clean observation rows ``[N, n]`` of each game; where the adversary's block ``u``
+        (``[N, k]``) lands (`index`) and its scale there (that game's current ε ⊙ normalizer
+        scale); and the observation space's bounds, into which the game clips perturbed rows.
         """
-        import torch
-
         d = self.disruptor
         start = sum(d.dims[t].size for t in d.targets[: d.targets.index(target)])
         stop = start + d.dims[target].size
@@ -345,13 +394,23 @@ class WhiteBoxAttackPolicy:
         for pol in policies:
             assert pol.game is not None  # act_group checked
             rows.append(np.asarray(pol.game.true_observation(target), dtype=np.float32).reshape(-1))
-        clean = torch.as_tensor(np.stack(rows))
-        scale = torch.as_tensor(
-            np.stack([pol.disruptor.unit[start:stop] for pol in policies]), dtype=torch.float32
-        )
-        index = torch.as_tensor(d.dims[target], dtype=torch.long)
-        low = torch.as_tensor(space.low.reshape(-1), dtype=torch.float32)
-        high = torch.as_tensor(space.high.reshape(-1), dtype=torch.float32)
+        scale = np.stack([pol.disruptor.unit[start:stop] for pol in policies]).astype(np.float32)
+        low = space.low.reshape(-1).astype(np.float32)
+        high = space.high.reshape(-1).astype(np.float32)
+        return np.stack(rows), np.asarray(d.dims[target]), scale, low, high
+
+    def _problem(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> tuple[Any, Any]:
+        """The clean rows ``[N, n]`` (torch) of `target` in each game, and ``u -> perturbed``.
+
+        The perturbed observations are the clean ones plus ``scale ⊙ u`` at `index`, clipped
+        into the observation space, as the game clips them (`_rows`).
+        """
+        import torch
+
+        clean_np, index_np, scale_np, low_np, high_np = self._rows(policies, target)
+        clean, scale = torch.as_tensor(clean_np), torch.as_tensor(scale_np)
+        index = torch.as_tensor(index_np, dtype=torch.long)
+        low, high = torch.as_tensor(low_np), torch.as_tensor(high_np)
 
         def perturb(u: torch.Tensor) -> torch.Tensor:
             delta = torch.zeros_like(clean).index_add(1, index, scale * u)
@@ -359,27 +418,72 @@ class WhiteBoxAttackPolicy:
 
         return clean, perturb
 
-    def _attack_rows(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> np.ndarray:
-        """Projected gradient ascent from random starts for every game; each row's best iterate."""
+    def _walk(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> Walk:
+        """The objective of every game's row, and its gradient, as functions of ``u``.
+
+        Through the victim's `NumpyNet` where the attack and the victim have one (no torch
+        per step), else through torch's autograd (`_torch_walk`).
+        """
+        victim = self.victims[target]
+        clean, index, scale, low, high = self._rows(policies, target)
+        scorer = self.spec.numpy_scorer(victim, clean) if self.spec.rowwise else None
+        if scorer is None:
+            return self._torch_walk(policies, target)
+        clipped = bool(np.isfinite(low).any() or np.isfinite(high).any())
+
+        def walk(u: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
+            x = clean.copy()
+            x[:, index] += scale * u.astype(np.float32)
+            inside = None
+            if clipped:
+                inside = (x > low) & (x < high)
+                x = np.maximum(np.minimum(x, high), low)
+            values, grad_x = scorer(x)
+
+            def grad() -> np.ndarray:
+                g = grad_x()
+                if inside is not None:
+                    g = g * inside
+                return g[:, index] * scale
+
+            return values.astype(np.float64), grad
+
+        return walk
+
+    def _torch_walk(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> Walk:
+        """`_walk` through torch: a graph per step, the gradient by autograd."""
         import torch
 
-        victim, size, n = self.victims[target], self.disruptor.dims[target].size, len(policies)
         clean, perturb = self._problem(policies, target)
-        best_u, best = np.zeros((n, size)), np.full(n, -np.inf)
         with torch.enable_grad():
-            score = self._scorer(victim, clean)
-            for _ in range(1 + self.spec.restarts):
-                u = self._project(np.stack([p.rng.uniform(-1.0, 1.0, size) for p in policies]))
-                for step in range(self.spec.steps + 1):
-                    u_t = torch.as_tensor(u, dtype=torch.float32).requires_grad_(True)
-                    values = score(perturb(u_t))
-                    scores = values.detach().numpy().astype(np.float64)
-                    better = scores > best
-                    best_u[better], best[better] = u[better], scores[better]
-                    if step == self.spec.steps:
-                        break
-                    (grad,) = torch.autograd.grad(values.sum(), u_t)
-                    u = self._project(u + self.alpha * self._direction(grad.numpy()))
+            score = self._scorer(self.victims[target], clean)
+
+        def walk(u: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
+            with torch.enable_grad():  # objectives may differentiate internally (a critic's)
+                u_t = torch.as_tensor(u, dtype=torch.float32).requires_grad_(True)
+                values = score(perturb(u_t))
+
+            def grad() -> np.ndarray:
+                return torch.autograd.grad(values.sum(), u_t)[0].numpy()
+
+            return values.detach().numpy().astype(np.float64), grad
+
+        return walk
+
+    def _attack_rows(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> np.ndarray:
+        """Projected gradient ascent from random starts for every game; each row's best iterate."""
+        size, n = self.disruptor.dims[target].size, len(policies)
+        walk = self._walk(policies, target)
+        best_u, best = np.zeros((n, size)), np.full(n, -np.inf)
+        for _ in range(1 + self.spec.restarts):
+            u = self._project(np.stack([p.rng.uniform(-1.0, 1.0, size) for p in policies]))
+            for step in range(self.spec.steps + 1):
+                scores, grad = walk(u)
+                better = scores > best
+                best_u[better], best[better] = u[better], scores[better]
+                if step == self.spec.steps:
+                    break
+                u = self._project(u + self.alpha * self._direction(grad()))
         return best_u
 
     def _scorer(self, victim: Any, clean: Any) -> Callable[[Any], Any]:

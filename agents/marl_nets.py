@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from advgame.core.numpy_net import NetCache, NumpyNet
 from advgame.core.policy import AgentInfo
 from advgame.errors import ConfigError
 
@@ -360,6 +361,7 @@ class TorchActorPolicy:
         self.deterministic = deterministic
         self._rng = np.random.default_rng(0)
         self._record = record  # kept alive: its id is the batch key's
+        self._numpy = NetCache()
 
     def reset(self, seed: int | None = None) -> None:
         """Reseed the action sampling (a stochastic policy's only randomness)."""
@@ -404,6 +406,13 @@ class TorchActorPolicy:
             std = torch.as_tensor(self.norm.std, dtype=torch.float32)
             x = ((obs - mean) / std).clamp(-self.norm.clip, self.norm.clip)
         return self.actor.mean(x)
+
+    def numpy_net(self, head: str) -> NumpyNet | None:
+        """The actor's mean (``"mean"``) as a `NumpyNet` behind the normalizer; no value head."""
+        if head != "mean":
+            return None
+        norm = None if self.norm is None else (self.norm.mean, self.norm.std, self.norm.clip)
+        return self._numpy.get("mean", [self.actor.mean], norm)
 
     def action_std(self) -> torch.Tensor:
         """The state-independent action std."""

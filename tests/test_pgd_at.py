@@ -25,14 +25,18 @@ def test_the_attack_reads_the_live_learner_and_collection_leaves_it_unchanged(
     torch.set_num_threads(1)
     seen: list[Any] = []
     rows: list[int] = []
-    scorer = MADAttack.row_scorer  # what each walk of the attack scores its iterates with
+    scorer = MADAttack.numpy_scorer  # what each walk of the attack scores its iterates with
 
     def spy(self: MADAttack, victim: Any, clean: Any) -> Any:
         seen.append(victim.model)
         rows.append(len(clean))
+        net = victim.numpy_net("mean")  # the NumPy copy it walks through: the weights as they are
+        with torch.no_grad():
+            live = victim.action_mean(torch.as_tensor(clean)).numpy()
+        np.testing.assert_allclose(net.forward(clean)[0], live, rtol=1e-5, atol=1e-6)
         return scorer(self, victim, clean)
 
-    monkeypatch.setattr(MADAttack, "row_scorer", spy)
+    monkeypatch.setattr(MADAttack, "numpy_scorer", spy)
     fns = [view_factory("Hopper-v5", "protagonist", {"observation_adversary": MADAttack(steps=2)},
                         preset="atla") for _ in range(2)]  # fmt: skip
     side = Side("protagonist", PPOConfig(n_steps=64, batch_size=32, n_epochs=1), fns, 0, 256)

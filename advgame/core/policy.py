@@ -66,6 +66,11 @@ class WhiteBox(Protocol):
     Every method takes a batch of *raw* observations as a float32 torch tensor ``[batch, obs]``
     and applies the policy's own frozen normalizer, so an attack works in the units the game
     uses. Implemented by `advgame.training.checkpoint.SB3Policy` and the MAPPO/IPPO actor policies.
+
+    Optionally a policy also has ``numpy_net(head)``: ``"mean"`` (`action_mean`) or ``"value"``
+    (`value`, for a policy without a Q critic) as an `advgame.core.numpy_net.NumpyNet`, the same
+    function in NumPy with its input gradient, or None. White-box attacks walk through it where
+    it is there (SB3's PPO, saved MAPPO/IPPO actors) and through torch otherwise.
     """
 
     def action_mean(self, obs: Any) -> Any:
@@ -113,6 +118,11 @@ class WhiteBoxForwarder:
     def q_value(self, obs: Any, action: Any) -> Any:
         """The wrapped policy's `WhiteBox.q_value`."""
         return self.wrapped.q_value(obs, action)
+
+    def numpy_net(self, head: str) -> Any:
+        """The wrapped policy's `numpy_net` (see `WhiteBox`), or None if it has none."""
+        numpy_net = getattr(self.wrapped, "numpy_net", None)
+        return None if numpy_net is None else numpy_net(head)
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ import numpy as np
 
 from advgame.core.episodes import build_policies, reseed_policies
 from advgame.core.game import Game, Move
+from advgame.core.numpy_net import NetCache, NumpyNet, sb3_modules
 from advgame.core.policy import gaussian_mean
 from advgame.errors import ConfigError
 
@@ -255,6 +256,7 @@ class _Placeholder:
     def __init__(self) -> None:
         self.model: Any = None
         self.normalizer: Any = None
+        self._numpy = NetCache()
 
     def reset(self, seed: int | None = None) -> None:
         """Unused."""
@@ -274,13 +276,27 @@ class _Placeholder:
             )
         if self.model.policy.training:
             self.model.policy.set_training_mode(False)
+        stats = self._statistics()
+        if stats is None:
+            return obs
+        mean, std, clip = stats
+        mean_t = torch.as_tensor(mean, dtype=torch.float32)
+        std_t = torch.as_tensor(std, dtype=torch.float32)
+        return ((obs - mean_t) / std_t).clamp(-clip, clip)
+
+    def _statistics(self) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """The learner's normalizer now: ``(mean, std, clip)``, or None if it normalizes nothing."""
         rms = getattr(self.normalizer, "obs_rms", None)
         if rms is None or not getattr(self.normalizer, "norm_obs", True):
-            return obs
-        mean = torch.as_tensor(rms.mean, dtype=torch.float32)
-        std = torch.as_tensor(np.sqrt(rms.var + self.normalizer.epsilon), dtype=torch.float32)
-        clip = float(self.normalizer.clip_obs)
-        return ((obs - mean) / std).clamp(-clip, clip)
+            return None
+        std = np.sqrt(rms.var + self.normalizer.epsilon)
+        return rms.mean, std, float(self.normalizer.clip_obs)
+
+    def numpy_net(self, head: str) -> NumpyNet | None:
+        """The learner's current mean or value head as a `NumpyNet` (copied again after updates)."""
+        if self.model is None:
+            return None
+        return self._numpy.get(head, sb3_modules(self.model_policy(), head), self._statistics())
 
     @property
     def batch_key(self) -> tuple | None:

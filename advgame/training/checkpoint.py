@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from advgame.core.files import reading
+from advgame.core.numpy_net import NetCache, NumpyNet, sb3_modules
 from advgame.core.policy import AgentInfo, gaussian_mean
 from advgame.errors import ConfigError, FileFormatError
 
@@ -157,6 +158,7 @@ class SB3Policy:
         self._sampler: Any = None
         self._key: tuple | None = None
         self._stats = (obs_mean, obs_var)
+        self._numpy = NetCache()
 
     @property
     def observation_std(self) -> np.ndarray | None:
@@ -299,6 +301,18 @@ class SB3Policy:
         if hasattr(policy.actor, "action_dist"):  # SAC: the squashed Gaussian's mode
             return policy.actor(x, deterministic=True)
         return policy.actor(x)
+
+    def numpy_net(self, head: str) -> NumpyNet | None:
+        """PPO's mean (``"mean"``) or value head (``"value"``) as a `NumpyNet` behind the normalizer.
+
+        What white-box attacks walk through when they can (the same function as `action_mean` or
+        `value`, without torch's per-step overhead); None for SAC, TD3 and policies with layers
+        a `NumpyNet` does not cover.
+        """
+        norm = None
+        if self.mean is not None and self.std is not None:
+            norm = (self.mean, self.std, self.clip_obs)
+        return self._numpy.get(head, sb3_modules(self.model.policy, head), norm)
 
     def action_std(self) -> Any:
         """PPO's state-independent action std; ``None`` for SAC/TD3 (attacked through means)."""
