@@ -29,14 +29,14 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from advgame.adversaries.whitebox import WhiteBoxAttackPolicy, _Attack
+from advgame.adversaries.whitebox import NumpyScorer, WhiteBoxAttackPolicy, _Attack, _numpy_net
 from advgame.core.policy import WhiteBox
 from advgame.errors import ConfigError
 
@@ -124,6 +124,28 @@ class RobustSarsaAttack(_Attack):
         """Per row, minus the learned ``Q^π(s, π(s + δ))`` (plus ``Q_c^π`` for the cost)."""
         q = _CRITICS[_key_of(victim)](clean, victim.action_mean(attacked))
         return q if self.signal == "cost" else -q
+
+    def numpy_scorer(self, victim: WhiteBox, clean: np.ndarray) -> NumpyScorer | None:
+        """`row_objective` and its gradient through NumPy copies of ``π``'s mean and ``Q^π``."""
+        actor, critic = _numpy_net(victim, "mean"), _CRITICS[_key_of(victim)]
+        q_net = critic.numpy_net()
+        if actor is None or q_net is None:
+            return None
+        stats, sign = critic.stats, np.float32(1 if self.signal == "cost" else -1)
+        state = (clean - stats["obs_mean"]) / stats["obs_std"]  # the true state: fixed per walk
+
+        def score(attacked: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
+            action, actor_tape = actor.forward(attacked)
+            x = np.concatenate([state, (action - stats["act_mean"]) / stats["act_std"]], axis=1)
+            q, q_tape = q_net.forward(x)
+
+            def grad() -> np.ndarray:
+                g = q_net.backward(q_tape, np.full_like(q, sign))[:, state.shape[1] :]
+                return actor.backward(actor_tape, g / stats["act_std"])
+
+            return sign * q[:, 0], grad
+
+        return score
 
     def build(self, info: Any) -> WhiteBoxAttackPolicy:
         """The attack for observation adversary `info.agent`; it learns ``Q^π`` when attached."""

@@ -17,6 +17,7 @@ import numpy as np
 from gymnasium import spaces
 
 from advgame.core.config import write_atomic
+from advgame.core.numpy_net import NetCache, NumpyNet
 from advgame.errors import ConfigError
 
 __all__ = ["QNetwork", "collect", "fit_sarsa", "probe_observations"]
@@ -48,6 +49,7 @@ class QNetwork:
         self.hidden = tuple(hidden)
         self.stats = {k: np.asarray(v, dtype=np.float32) for k, v in stats.items()}
         self._t = {k: torch.as_tensor(v) for k, v in self.stats.items()}
+        self._numpy = NetCache()
 
     def __call__(self, obs: Any, action: Any) -> Any:
         """``Q`` of raw observations ``[n, obs]`` and actions ``[n, act]`` (``[n]``)."""
@@ -58,6 +60,10 @@ class QNetwork:
             [(obs - t["obs_mean"]) / t["obs_std"], (action - t["act_mean"]) / t["act_std"]], -1
         )
         return self.net(x).squeeze(-1)
+
+    def numpy_net(self) -> NumpyNet | None:
+        """The network (after the standardization of ``[s, a]``) as a `NumpyNet`, or None."""
+        return self._numpy.get("q", [self.net], None)
 
     def save(self, path: Path) -> None:
         """Write the network and its statistics to `path` (atomically)."""

@@ -12,6 +12,7 @@ import torch
 from torch import nn
 
 import advgame
+from advgame.adversaries import MaxCostAttack, RobustSarsaAttack
 from advgame.adversaries.whitebox import CriticAttack, MADAttack, WhiteBoxAttackPolicy
 from advgame.core.episodes import build_policies
 from advgame.core.numpy_net import NumpyNet
@@ -113,13 +114,24 @@ def test_saved_team_actors_have_a_numpy_mean() -> None:
     np.testing.assert_allclose(net.forward(obs)[0], expected, rtol=1e-5, atol=1e-6)
 
 
-@pytest.mark.parametrize("attack", [MADAttack(steps=3), CriticAttack(steps=3)])
-@pytest.mark.parametrize("space", ["raw", "normalized"])
+ATTACKS = {
+    "mad": lambda cache: MADAttack(steps=3),
+    "critic": lambda cache: CriticAttack(steps=3),
+    "rs": lambda cache: RobustSarsaAttack(steps=3, samples=300, epochs=1, cache_dir=cache),
+    "max-cost": lambda cache: MaxCostAttack(steps=3, samples=300, epochs=1, cache_dir=cache),
+}
+
+
+@pytest.mark.parametrize(
+    ("name", "space"), [("mad", "raw"), ("mad", "normalized"), ("critic", "raw"),
+                        ("critic", "normalized"), ("rs", "raw"), ("max-cost", "normalized")],
+)  # fmt: skip
 def test_attacks_walk_in_numpy_and_score_what_torch_scores(
-    hopper_ppo: Any, attack: Any, space: str, monkeypatch: pytest.MonkeyPatch
+    hopper_ppo: Any, name: str, space: str, tmp_path: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    victim = _victim(hopper_ppo)
-    game = advgame.make("Hopper-v5", disruptors=[ObservationDisruptor(eps=0.3, space=space)])
+    victim, attack = _victim(hopper_ppo), ATTACKS[name](str(tmp_path))
+    disruptor = ObservationDisruptor(eps=0.3, space=space)
+    game = advgame.make("SafetyHopper-v5", disruptors=[disruptor])  # a cost, for max-cost
     pols = build_policies(game, {"protagonist": victim, ADV: attack})
     if space == "normalized":
         game.set_observation_scale("protagonist", np.linspace(0.5, 2.0, 11))
