@@ -29,6 +29,8 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.utils import explained_variance
 from torch.nn import functional as F
 
+from advgame.core.numpy_net import NumpyNet, sb3_modules
+
 __all__ = ["SAPPO", "sa_regulariser"]
 
 
@@ -65,13 +67,49 @@ def sa_regulariser(
         return torch.zeros((), dtype=obs.dtype), obs
     step = 2.5 * eps / max(steps, 1)  # the walk can cross the ball 2.5 times (Madry et al.)
     delta = (torch.rand_like(obs) * 2 - 1) * eps
-    for _ in range(steps):
+    walked = _numpy_walk(policy, obs, eps, step, steps, (low, high), delta)
+    if walked is not None:
+        delta = walked
+    for _ in range(0 if walked is not None else steps):
         delta.requires_grad_(True)
         x = torch.clamp(obs + delta, low, high)
         (grad,) = torch.autograd.grad(_kl(policy, x, reference).sum(), delta)
         delta = torch.max(torch.min(delta.detach() + step * grad.sign(), eps), -eps)
     attacked = torch.clamp(obs + delta.detach(), low, high)
     return _kl(policy, attacked, reference).mean(), attacked
+
+
+def _numpy_walk(
+    policy: Any,
+    obs: torch.Tensor,
+    eps: torch.Tensor,
+    step: torch.Tensor,
+    steps: int,
+    bounds: tuple[float, float],
+    delta: torch.Tensor,
+) -> torch.Tensor | None:
+    """`sa_regulariser`'s PGD from `delta`, through a NumPy copy of the actor's Gaussian mean.
+
+    The same walk as the torch loop (signed steps on ``KL = Σ (μ(ŝ) − μ(s))² / 2σ²``, the
+    clip's gradient, the projection), without a graph and an autograd pass per step; the
+    copy is made for this minibatch (the weights change after every one). None where the
+    policy is not a plain Gaussian MLP (`advgame.core.numpy_net.sb3_modules`): torch walks.
+    """
+    modules = sb3_modules(policy, "mean")
+    net = None if modules is None else NumpyNet.of(modules, probe=False)
+    if net is None or steps < 1:
+        return None
+    low, high = np.float32(bounds[0]), np.float32(bounds[1])
+    inv_var = torch.exp(-2 * policy.log_std.detach()).numpy()  # 1 / σ² per action dimension
+    x0, e, h = obs.detach().numpy(), eps.numpy(), step.numpy()
+    d = delta.numpy()
+    reference = net.forward(x0)[0]
+    for _ in range(steps):
+        pre = x0 + d
+        mean, tape = net.forward(pre.clip(low, high))
+        grad = net.backward(tape, (mean - reference) * inv_var) * ((pre >= low) & (pre <= high))
+        d = np.maximum(np.minimum(d + h * np.sign(grad), e), -e)
+    return torch.as_tensor(d)
 
 
 class SAPPO(PPO):

@@ -13,6 +13,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from advgame.agents import sa_ppo
 from advgame.agents.sa_ppo import SAPPO, sa_regulariser
 from advgame.cli import main
 
@@ -31,16 +32,29 @@ def test_the_regulariser_is_zero_at_eps_zero(policy: object) -> None:
     assert float(value) == 0.0 and torch.equal(attacked, obs)
 
 
-def test_the_inner_maximisation_beats_the_best_of_many_random_points(policy: object) -> None:
+@pytest.mark.parametrize("walk", ["numpy", "torch"])
+def test_the_inner_maximisation_beats_the_best_of_many_random_points(
+    policy: object, walk: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[object] = []
+    numpy_walk = sa_ppo._numpy_walk
+
+    def spy(*args: object) -> object:
+        calls.append(out := numpy_walk(*args) if walk == "numpy" else None)
+        return out
+
+    monkeypatch.setattr(sa_ppo, "_numpy_walk", spy)
     torch.manual_seed(1)
-    obs, eps = torch.randn(16, 11), torch.full((11,), 0.3)
-    found, attacked = sa_regulariser(policy, obs, eps, steps=10)
-    assert torch.all((attacked - obs).abs() <= eps + 1e-6)  # inside the ball
+    obs, eps = torch.randn(16, 11).clamp(-1.5, 1.5), torch.full((11,), 0.3)
+    found, attacked = sa_regulariser(policy, obs, eps, steps=10, low=-1.5, high=1.5)
+    assert calls and (calls[0] is not None) == (walk == "numpy")  # a plain MLP walks in numpy
+    assert torch.all((attacked - obs).abs() <= eps + 1e-6)  # inside the ball (and the clip)
+    assert torch.all(attacked.abs() <= 1.5)
     with torch.no_grad():
         clean = policy.get_distribution(obs).distribution  # type: ignore[attr-defined]
         best = torch.zeros(16)
         for _ in range(200):
-            x = obs + (torch.rand_like(obs) * 2 - 1) * eps
+            x = (obs + (torch.rand_like(obs) * 2 - 1) * eps).clamp(-1.5, 1.5)
             kl = torch.distributions.kl_divergence(clean, policy.get_distribution(x).distribution)  # type: ignore[attr-defined]
             best = torch.maximum(best, kl.sum(-1))
     assert float(found) >= float(best.mean())

@@ -75,11 +75,14 @@ class NumpyNet:
         cls,
         modules: Sequence[Any],
         normalizer: tuple[np.ndarray, np.ndarray, float] | None = None,
+        probe: bool = True,
     ) -> NumpyNet | None:
         """The NumPy copy of torch `modules` (``nn.Sequential``s and layers, in order), or None.
 
         None when a module is not ``nn.Linear``, ``nn.Tanh``, ``nn.ReLU`` or ``nn.Flatten``, or
-        when the probe finds a batched row differs from the same row alone in any bit.
+        when the probe finds a batched row differs from the same row alone in any bit
+        (``probe=False`` skips it: for a copy whose rows need not match lone rows, such as a
+        learner's minibatch).
         """
         layers: list[tuple[Any, ...]] = []
         for module in modules:
@@ -97,7 +100,7 @@ class NumpyNet:
         if not layers or layers[0][0] != "linear":
             return None
         net = cls(layers, normalizer)
-        return net if net._probe() else None
+        return net if not probe or net._probe() else None
 
     @property
     def in_features(self) -> int:
