@@ -151,3 +151,30 @@ def test_attacks_walk_in_numpy_and_score_what_torch_scores(
         expected_scores, expected_grad = torch_walk(u)
         np.testing.assert_allclose(scores, expected_scores, rtol=1e-5, atol=1e-7)
         np.testing.assert_allclose(grad(), expected_grad(), rtol=1e-4, atol=1e-7)
+
+
+def test_without_torchs_version_counter_the_stamp_is_the_weights_bytes() -> None:
+    from advgame.core.numpy_net import weights_stamp
+
+    class Param:  # a parameter without ``_version`` (what the stamp falls back on)
+        def __init__(self, values: np.ndarray) -> None:
+            self.values = values
+
+        def detach(self) -> Any:
+            return self
+
+        def numpy(self) -> np.ndarray:
+            return self.values
+
+    class Module:
+        def __init__(self, param: Param) -> None:
+            self.param = param
+
+        def parameters(self) -> list[Param]:
+            return [self.param]
+
+    module = Module(Param(np.zeros(3, np.float32)))
+    before = weights_stamp([module])
+    assert weights_stamp([module]) == before
+    module.param.values[1] = 1.0  # an update in place
+    assert weights_stamp([module]) != before

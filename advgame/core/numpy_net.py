@@ -212,9 +212,15 @@ def weights_stamp(modules: Sequence[Any]) -> tuple[Any, ...]:
     """What changes when any parameter of `modules` is replaced or updated in place.
 
     A `NumpyNet` is a copy: its owner rebuilds it when the stamp of the torch modules it
-    copied changes (a live learner between updates).
+    copied changes (a live learner between updates). Torch counts in-place updates of a tensor
+    (``_version``); where a build lacks that counter, the stamp is the parameters' bytes.
     """
-    return tuple((id(p), p._version) for module in modules for p in module.parameters())
+    stamp = []
+    for module in modules:
+        for p in module.parameters():
+            version = getattr(p, "_version", None)
+            stamp.append((id(p), p.detach().numpy().tobytes() if version is None else version))
+    return tuple(stamp)
 
 
 class NetCache:
