@@ -36,8 +36,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from advgame.adversaries.whitebox import NumpyScorer, WhiteBoxAttackPolicy, _Attack, _numpy_net
-from advgame.core.policy import WhiteBox
+from advgame.adversaries.whitebox import NumpyScorer, WhiteBoxAttackPolicy, _Attack
+from advgame.core.policy import WhiteBox, numpy_net_of
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -127,7 +127,7 @@ class RobustSarsaAttack(_Attack):
 
     def numpy_scorer(self, victim: WhiteBox, clean: np.ndarray) -> NumpyScorer | None:
         """`row_objective` and its gradient through NumPy copies of ``π``'s mean and ``Q^π``."""
-        actor, critic = _numpy_net(victim, "mean"), _CRITICS[_key_of(victim)]
+        actor, critic = numpy_net_of(victim, "mean"), _CRITICS[_key_of(victim)]
         q_net = critic.numpy_net()
         if actor is None or q_net is None:
             return None

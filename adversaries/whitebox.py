@@ -32,8 +32,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from advgame.core.numpy_net import NumpyNet
-from advgame.core.policy import AgentInfo, WhiteBox
+from advgame.core.policy import AgentInfo, WhiteBox, numpy_net_of
 from advgame.disruptors.observation import ObservationRuntime
 from advgame.errors import ConfigError
 
@@ -55,12 +54,6 @@ NumpyScorer = Callable[[np.ndarray], tuple[np.ndarray, Callable[[], np.ndarray]]
 
 Walk = Callable[[np.ndarray], tuple[np.ndarray, Callable[[], np.ndarray]]]
 """The adversary's actions ``[N, k]`` -> (objective per row, float64; its gradient in them)."""
-
-
-def _numpy_net(victim: Any, head: str) -> NumpyNet | None:
-    """The victim's `numpy_net(head)` (see `WhiteBox`), or None where it has none."""
-    numpy_net = getattr(victim, "numpy_net", None)
-    return None if numpy_net is None else numpy_net(head)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -189,7 +182,7 @@ class MADAttack(_Attack):
 
     def numpy_scorer(self, victim: WhiteBox, clean: np.ndarray) -> NumpyScorer | None:
         """The KL (or squared distance) and its gradient through the victim's `NumpyNet`."""
-        net = _numpy_net(victim, "mean")
+        net = numpy_net_of(victim, "mean")
         if net is None:
             return None
         reference = net.forward(clean)[0]
@@ -225,7 +218,7 @@ class CriticAttack(_Attack):
 
     def numpy_scorer(self, victim: WhiteBox, clean: np.ndarray) -> NumpyScorer | None:
         """Minus ``V`` through the victim's value `NumpyNet` (a policy without a Q critic)."""
-        net = _numpy_net(victim, "value")
+        net = numpy_net_of(victim, "value")
         if net is None:
             return None
 
@@ -399,15 +392,19 @@ class WhiteBoxAttackPolicy:
         high = space.high.reshape(-1).astype(np.float32)
         return np.stack(rows), np.asarray(d.dims[target]), scale, low, high
 
-    def _problem(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> tuple[Any, Any]:
+    def _problem(
+        self, policies: Sequence[WhiteBoxAttackPolicy], target: str, rows: tuple | None = None
+    ) -> tuple[Any, Any]:
         """The clean rows ``[N, n]`` (torch) of `target` in each game, and ``u -> perturbed``.
 
         The perturbed observations are the clean ones plus ``scale ⊙ u`` at `index`, clipped
-        into the observation space, as the game clips them (`_rows`).
+        into the observation space, as the game clips them (`_rows`, unless given as `rows`).
         """
         import torch
 
-        clean_np, index_np, scale_np, low_np, high_np = self._rows(policies, target)
+        if rows is None:
+            rows = self._rows(policies, target)
+        clean_np, index_np, scale_np, low_np, high_np = rows
         clean, scale = torch.as_tensor(clean_np), torch.as_tensor(scale_np)
         index = torch.as_tensor(index_np, dtype=torch.long)
         low, high = torch.as_tensor(low_np), torch.as_tensor(high_np)
@@ -425,10 +422,11 @@ class WhiteBoxAttackPolicy:
         per step), else through torch's autograd (`_torch_walk`).
         """
         victim = self.victims[target]
-        clean, index, scale, low, high = self._rows(policies, target)
+        rows = self._rows(policies, target)
+        clean, index, scale, low, high = rows
         scorer = self.spec.numpy_scorer(victim, clean) if self.spec.rowwise else None
         if scorer is None:
-            return self._torch_walk(policies, target)
+            return self._torch_walk(policies, target, rows)
         clipped = bool(np.isfinite(low).any() or np.isfinite(high).any())
 
         def walk(u: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
@@ -450,11 +448,13 @@ class WhiteBoxAttackPolicy:
 
         return walk
 
-    def _torch_walk(self, policies: Sequence[WhiteBoxAttackPolicy], target: str) -> Walk:
+    def _torch_walk(
+        self, policies: Sequence[WhiteBoxAttackPolicy], target: str, rows: tuple | None = None
+    ) -> Walk:
         """`_walk` through torch: a graph per step, the gradient by autograd."""
         import torch
 
-        clean, perturb = self._problem(policies, target)
+        clean, perturb = self._problem(policies, target, rows)
         with torch.enable_grad():
             score = self._scorer(self.victims[target], clean)
 

@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.policy import plain_gaussian
+
 __all__ = ["NetCache", "NumpyNet", "sb3_modules", "weights_stamp"]
 
 _PROBE_SIZES = (2, 3, 8, 33)
@@ -171,8 +173,8 @@ def _float32_normalizer(
     if normalizer is None:
         return None
     mean, std, clip = normalizer
-    as32 = np.asarray(mean, dtype=np.float32).reshape(-1), np.asarray(std, dtype=np.float32)
-    return as32[0], as32[1].reshape(-1), np.float32(clip)
+    mean32 = np.asarray(mean, dtype=np.float32).reshape(-1)
+    return mean32, np.asarray(std, dtype=np.float32).reshape(-1), np.float32(clip)
 
 
 def sb3_modules(policy: Any, head: str) -> list[Any] | None:
@@ -182,7 +184,6 @@ def sb3_modules(policy: Any, head: str) -> list[Any] | None:
     extractor, SB3's ``MlpExtractor``, a diagonal Gaussian); ``"value"``: its value head. None
     for anything else (SAC, TD3, a custom extractor or distribution): attacks keep torch.
     """
-    from stable_baselines3.common.distributions import DiagGaussianDistribution
     from stable_baselines3.common.policies import ActorCriticPolicy
     from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
 
@@ -190,11 +191,7 @@ def sb3_modules(policy: Any, head: str) -> list[Any] | None:
         return None
     kind = type(policy)
     if head == "mean":
-        plain = (
-            kind.get_distribution is ActorCriticPolicy.get_distribution
-            and kind._get_action_dist_from_latent is ActorCriticPolicy._get_action_dist_from_latent
-            and type(policy.action_dist) is DiagGaussianDistribution
-        )
+        plain = plain_gaussian(policy)
         extractor = policy.pi_features_extractor
         layers = [policy.mlp_extractor.policy_net, policy.action_net]
     elif head == "value":

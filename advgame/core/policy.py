@@ -121,8 +121,7 @@ class WhiteBoxForwarder:
 
     def numpy_net(self, head: str) -> Any:
         """The wrapped policy's `numpy_net` (see `WhiteBox`), or None if it has none."""
-        numpy_net = getattr(self.wrapped, "numpy_net", None)
-        return None if numpy_net is None else numpy_net(head)
+        return numpy_net_of(self.wrapped, head)
 
 
 @dataclass(frozen=True)
@@ -227,6 +226,30 @@ def act_batch(policies: Sequence[Any], observations: Sequence[Any]) -> Sequence[
     return [p.act(o) for p, o in zip(policies, observations, strict=True)]
 
 
+def plain_gaussian(policy: Any) -> bool:
+    """Whether `policy` is SB3's own ``ActorCriticPolicy`` acting through a plain diagonal Gaussian.
+
+    Its mean is then ``action_net(forward_actor(features(x)))``, which `gaussian_mean` and the
+    NumPy copies of `advgame.core.numpy_net` compute without SB3's distribution objects.
+    """
+    from stable_baselines3.common.distributions import DiagGaussianDistribution
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    kind = type(policy)
+    return (
+        isinstance(policy, ActorCriticPolicy)
+        and kind.get_distribution is ActorCriticPolicy.get_distribution
+        and kind._get_action_dist_from_latent is ActorCriticPolicy._get_action_dist_from_latent
+        and type(policy.action_dist) is DiagGaussianDistribution
+    )
+
+
+def numpy_net_of(policy: Any, head: str) -> Any:
+    """``policy.numpy_net(head)`` (the optional `WhiteBox` method), or None where it has none."""
+    numpy_net = getattr(policy, "numpy_net", None)
+    return None if numpy_net is None else numpy_net(head)
+
+
 def gaussian_mean(policy: Any, x: Any) -> Any:
     """``policy.get_distribution(x).distribution.mean``, without building the distribution.
 
@@ -236,16 +259,9 @@ def gaussian_mean(policy: Any, x: Any) -> Any:
     any other policy (one that overrides those steps, another distribution): ask
     ``get_distribution``.
     """
-    from stable_baselines3.common.distributions import DiagGaussianDistribution
     from stable_baselines3.common.policies import ActorCriticPolicy
 
-    kind = type(policy)
-    if not (
-        isinstance(policy, ActorCriticPolicy)
-        and kind.get_distribution is ActorCriticPolicy.get_distribution
-        and kind._get_action_dist_from_latent is ActorCriticPolicy._get_action_dist_from_latent
-        and type(policy.action_dist) is DiagGaussianDistribution
-    ):
+    if not plain_gaussian(policy):
         return None
     extract = super(ActorCriticPolicy, policy).extract_features
     features = extract(x, policy.pi_features_extractor)
