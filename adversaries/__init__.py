@@ -1,4 +1,4 @@
-"""Adversary policies: noise, scheduled shifts, white-box attacks (MAD, critic, PGD, Robust Sarsa, max-cost), LLMs.
+"""Adversary policies: noise, scheduled shifts, white-box attacks (MAD, critic, PGD, Robust Sarsa, max-cost, PA-AD), LLMs.
 
 Every adversary here is a frozen, picklable *spec* with ``build(info) -> Policy``; the built
 policy speaks the one `advgame.core.policy.Policy` interface (``reset(seed)``, ``act(obs)``), so
@@ -19,6 +19,7 @@ from advgame.adversaries.noise import (
     UniformAdversary,
     ZeroAdversary,
 )
+from advgame.adversaries.paad import PAADAttack
 from advgame.adversaries.robust_sarsa import MaxCostAttack, RobustSarsaAttack
 from advgame.adversaries.scheduled import ConstantAdversary, SinusoidAdversary
 from advgame.adversaries.whitebox import CriticAttack, MADAttack, PGDAttack
@@ -49,6 +50,7 @@ __all__ = [
     "MADAttack",
     "MaxCostAttack",
     "OpenAIEndpoint",
+    "PAADAttack",
     "PGDAttack",
     "RandomAdversary",
     "RobustSarsaAttack",

@@ -16,6 +16,7 @@ text            spec                                              argument
 ``rs``          `RobustSarsaAttack` (white-box, learned critic)
 ``max-cost``    `MaxCostAttack` (white-box, learned cost critic;
                 safe scenarios)
+``pa-ad``       `PAADAttack` (white-box, learned director)
 ``llm``         `LLMAdversary` (the offline local model; a dict
                 may give ``backend``: ``{"kind": "openai", ...}``)
 ==============  ================================================  ======================
@@ -30,7 +31,10 @@ from advgame.errors import AdvgameError, ConfigError, UnknownNameError, did_you_
 
 __all__ = ["KINDS", "adversary_spec"]
 
-KINDS = ("zero", "random", "gauss", "uniform", "constant", "mad", "critic", "rs", "max-cost", "llm")
+KINDS = (
+    "zero", "random", "gauss", "uniform", "constant", "mad", "critic", "rs", "max-cost", "pa-ad",
+    "llm",
+)  # fmt: skip
 """The kind names `adversary_spec` knows."""
 
 
@@ -41,7 +45,7 @@ def _classes() -> dict[str, Any]:
         "zero": a.ZeroAdversary, "random": a.RandomAdversary, "gauss": a.GaussianAdversary,
         "uniform": a.UniformAdversary, "constant": a.ConstantAdversary, "mad": a.MADAttack,
         "critic": a.CriticAttack, "rs": a.RobustSarsaAttack, "max-cost": a.MaxCostAttack,
-        "llm": a.LLMAdversary,
+        "pa-ad": a.PAADAttack, "llm": a.LLMAdversary,
     }  # fmt: skip
 
 

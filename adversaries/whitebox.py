@@ -424,7 +424,7 @@ class WhiteBoxAttackPolicy:
         victim = self.victims[target]
         rows = self._rows(policies, target)
         clean, index, scale, low, high = rows
-        scorer = self.spec.numpy_scorer(victim, clean) if self.spec.rowwise else None
+        scorer = self._numpy_scorer(policies, victim, clean)
         if scorer is None:
             return self._torch_walk(policies, target, rows)
         clipped = bool(np.isfinite(low).any() or np.isfinite(high).any())
@@ -456,7 +456,7 @@ class WhiteBoxAttackPolicy:
 
         clean, perturb = self._problem(policies, target, rows)
         with torch.enable_grad():
-            score = self._scorer(self.victims[target], clean)
+            score = self._scorer(self.victims[target], clean, policies)
 
         def walk(u: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
             with torch.enable_grad():  # objectives may differentiate internally (a critic's)
@@ -486,8 +486,20 @@ class WhiteBoxAttackPolicy:
                 u = self._project(u + self.alpha * self._direction(grad()))
         return best_u
 
-    def _scorer(self, victim: Any, clean: Any) -> Callable[[Any], Any]:
-        """Attacked rows -> the objective per row (``[N]``).
+    def _numpy_scorer(
+        self, policies: Sequence[WhiteBoxAttackPolicy], victim: Any, clean: np.ndarray
+    ) -> NumpyScorer | None:
+        """The spec's `_Attack.numpy_scorer` for the rows of `policies` (None: walk in torch).
+
+        A hook for attacks whose objective also depends on each game's own state (PA-AD's
+        direction per row).
+        """
+        return self.spec.numpy_scorer(victim, clean) if self.spec.rowwise else None
+
+    def _scorer(
+        self, victim: Any, clean: Any, policies: Sequence[WhiteBoxAttackPolicy] = ()
+    ) -> Callable[[Any], Any]:
+        """Attacked rows -> the objective per row (``[N]``), for the rows of `policies`.
 
         An attack scored as one scalar plays one row.
         """

@@ -195,9 +195,11 @@ _COLUMN_HELP = (
     "scheduled",
     "learned[:RUN_DIR] (latest learned snapshot; no RUN_DIR: of every evaluated run)",
     "population:RUN_DIR|FILE[,last=K|,sample=K][,preset=NAME] (one column per snapshot)",
-    "attack:random|mad|critic (noise in the threat model's observation budget, or a white-box "
-    "attack on each protagonist's own networks)",
-    "attacks = attack:random attack:mad attack:critic learned (the worst-of-attacks suite)",
+    "attack:random|mad|critic|rs|max-cost|pa-ad (noise in the threat model's observation "
+    "budget, or a white-box attack on each protagonist's own networks; rs, max-cost and pa-ad "
+    "first learn a critic or a director per protagonist, cached)",
+    "attacks = attack:random attack:mad attack:critic attack:rs learned (the worst-of-attacks "
+    "suite)",
     "default = nominal random scheduled learned",
 )
 

@@ -18,6 +18,10 @@ named `AdversarySetup`s (``nominal`` always first, the metrics are relative to i
                                  epochs=N for its critic)
     attack:max-cost              safe scenarios: Liu et al.'s maximum-cost attack, towards the
                                  action a learned cost critic values most (options as rs)
+    attack:pa-ad                 PA-AD: a director learned against each protagonist picks a
+                                 direction in its actions, a white-box walk pushes the action
+                                 there (`advgame.adversaries.paad`; option samples=N: the
+                                 director's training steps, default 200k)
     attacks                      the worst-of-attacks suite: attack:random, attack:mad,
                                  attack:critic (skipped for teams: their actors have no critic),
                                  attack:rs and every evaluated run's learned adversaries
@@ -157,8 +161,8 @@ OPTIONS = ("last", "sample", "preset", "samples", "epochs")
 """The ``KEY=VALUE`` options a column spec may carry."""
 ATTACKS = ("random", "mad", "critic", "rs")
 """The attacks of the ``attacks`` suite (in this order)."""
-ATTACK_KINDS = (*ATTACKS, "max-cost")
-"""The attacks of the ``attack:`` kind: the suite's and the safe-RL max-cost attack."""
+ATTACK_KINDS = (*ATTACKS, "max-cost", "pa-ad")
+"""The attacks of the ``attack:`` kind: the suite's, the safe-RL max-cost attack and PA-AD."""
 
 
 def default_threat(scenario: str) -> str:
@@ -173,6 +177,7 @@ def _attack(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, 
         CriticAttack,
         MADAttack,
         MaxCostAttack,
+        PAADAttack,
         RandomAdversary,
         RobustSarsaAttack,
     )
@@ -186,10 +191,12 @@ def _attack(ctx: ColumnContext, arg: str, opts: Mapping[str, str]) -> dict[str, 
     agent = observation_agent(ctx.scenario, preset)
     kinds = {
         "mad": MADAttack, "critic": CriticAttack, "rs": RobustSarsaAttack,
-        "max-cost": MaxCostAttack,
+        "max-cost": MaxCostAttack, "pa-ad": PAADAttack,
     }  # fmt: skip
     learned = arg in ("rs", "max-cost")
     options = {k: _count(opts, k, None) for k in ("samples", "epochs") if learned and k in opts}
+    if arg == "pa-ad" and "samples" in opts:  # the director's training steps
+        options = {"director_steps": _count(opts, "samples", None)}
     spec = RandomAdversary() if arg == "random" else kinds[arg](**options)
     return {f"attack {arg}": AdversarySetup({"preset": preset}, {agent: spec})}
 
@@ -312,7 +319,8 @@ def parse_spec(spec: str) -> tuple[str, str, dict[str, str]]:
         if not sep or key not in OPTIONS:
             raise ConfigError(
                 f"Bad option {item!r} in {spec!r}; options are last=K, sample=K, preset=NAME "
-                "(populations), samples=N, epochs=N (the Robust Sarsa critic of attack:rs)."
+                "(populations), samples=N, epochs=N (the Robust Sarsa critic of attack:rs; samples=N: "
+                "the PA-AD director's training steps)."
             )
         opts[key] = value
     return kind, arg, opts

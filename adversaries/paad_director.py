@@ -1,0 +1,116 @@
+"""Training a PA-AD director: the observation adversary's views with a direction as action.
+
+`DirectorEnv` turns the observation adversary's `advgame.core.vector.VectorView` into the
+director's environment, and `train_director` trains one with PPO against a frozen victim
+(`advgame.adversaries.paad.PAADAttack` calls it the first time it meets a victim).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnvWrapper
+
+from advgame.adversaries.paad import PAADAttack, _PAADPolicy, director_info
+from advgame.adversaries.whitebox import WhiteBoxAttackPolicy
+from advgame.errors import ConfigError
+
+__all__ = ["DirectorEnv", "train_director"]
+
+
+class DirectorEnv(VecEnvWrapper):
+    """The observation adversary's views with PA-AD's action: a direction in the victim's actions.
+
+    Wraps a `advgame.core.vector.VectorView` of the observation adversary (its views embed the
+    frozen victim). Each step takes one direction per view (``Box(-1, 1, victim action
+    shape)``), turns it into the adversary's perturbation by the actor's walk on every view at
+    once, and steps the views with it: what the director learns on. Observations and rewards
+    are the views' (the true state; minus the protagonists' payoff).
+
+    Args:
+        venv: the adversary's `VectorView`.
+        spec: the attack (the actor's walk settings).
+        seed: seeds view ``i``'s random starts with ``seed + i``.
+
+    """
+
+    def __init__(self, venv: Any, spec: PAADAttack, seed: int = 0) -> None:
+        self.attackers: list[_PAADPolicy] = []
+        space = None
+        for i, view in enumerate(venv.envs):
+            info = view.game.agent_info(view.agent)
+            pol = _PAADPolicy(spec, info)
+            targets = pol.disruptor.targets
+            if len(targets) != 1:
+                raise ConfigError(
+                    f"A PA-AD director plays one target; {view.agent!r} perturbs {list(targets)}."
+                )
+            WhiteBoxAttackPolicy.attach(pol, view.game, {t: view.policies.get(t) for t in targets})
+            pol.reset(seed + i)
+            self.attackers.append(pol)
+            space = director_info(view.game, view.agent, targets[0]).action_space
+        super().__init__(venv, action_space=space)
+
+    def reset(self) -> Any:
+        """Reset the views."""
+        return self.venv.reset()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        """Walk every view's perturbation towards its direction, then step the views with them."""
+        for pol, d in zip(self.attackers, np.asarray(actions, dtype=np.float64), strict=True):
+            pol.direction = np.clip(d.reshape(-1), -1.0, 1.0)
+        head = self.attackers[0]
+        blocks = [head._attack_rows(self.attackers, t) for t in head.disruptor.targets]
+        self.venv.step_async(np.concatenate(blocks, axis=1).astype(np.float32))
+
+    def step_wait(self) -> Any:
+        """The views' step results."""
+        return self.venv.step_wait()
+
+
+def train_director(
+    spec: PAADAttack,
+    scenario: str,
+    disruptor: Any,
+    agent: str,
+    target: str,
+    victim: Any,
+    folder: Path,
+    *,
+    phase: str = "eval",
+) -> Any:
+    """Train a PA-AD director against `victim` and save it in `folder`; return its spec.
+
+    Args:
+        spec: the attack (walk and training settings).
+        scenario: the registered scenario.
+        disruptor: the observation disruptor's spec the director plays (budget and norm).
+        agent: that disruptor's adversary agent.
+        target: the protagonist it perturbs (`victim` plays it).
+        victim: the frozen protagonist policy (a `WhiteBox`).
+        folder: where the director's model and normalizer are written.
+        phase: the game phase to train in (the attack's evaluation phase).
+
+    """
+    from advgame.core.vector import VectorView
+    from advgame.core.views import view_factory
+    from advgame.training.config import learner_config
+    from advgame.training.learning import Side, normalized
+
+    rollout = min(2048, spec.director_steps)  # PPO's rollout, shorter for a tiny budget
+    hparams = {"learning_rate": spec.learning_rate, "ent_coef": spec.ent_coef, "n_steps": rollout}
+    learner = learner_config("ppo", {**hparams, "batch_size": min(64, rollout)})
+    fn = view_factory(scenario, agent, {target: victim}, disruptors=[disruptor], phase=phase)
+    views = VectorView([fn])
+    std = getattr(victim, "observation_std", None)
+    if std is not None:  # a normalized-space budget is measured in the victim's normalizer
+        views.env_method("set_observation_scale", target, std)
+    venv = normalized(DirectorEnv(views, spec, seed=spec.seed), True, learner.gamma)
+    side = Side(agent, learner, [], spec.seed, spec.director_steps, venv=venv)
+    try:
+        side.learn(spec.director_steps)
+        return side.save(Path(folder))
+    finally:
+        side.close()
