@@ -31,6 +31,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import shutil
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -152,20 +153,10 @@ class PAADAttack(_Attack):
         under the cache folder and returned as an `SB3Checkpoint`.
         """
         from advgame.adversaries.paad_director import train_director
-        from advgame.adversaries.sarsa_critic import probe_observations
         from advgame.training.checkpoint import SB3Checkpoint
 
-        disruptor = game.disruptors[agent]
-        size = int(np.prod(game.observation_space(target).shape or ()))
-        parts = [_fingerprint(victim, probe_observations(size))]
-        settings = repr(sorted(asdict(self).items()))
-        std = getattr(victim, "observation_std", None)
-        parts.append(b"" if std is None else np.asarray(std, np.float64).tobytes())
-        text = f"{game.scenario_id}|{agent}|{target}|{disruptor.spec!r}|{game.phase}|{settings}|"
-        key = hashlib.sha256(text.encode() + b"|".join(parts)).hexdigest()[:24]
+        key, folder = self._cached(game, agent, target, victim)
         if key not in _DIRECTORS:
-            root = Path(self.cache_dir) if self.cache_dir else default_cache_dir()
-            folder = root / f"{game.scenario_id or 'game'}-{key}"
             model, norm = folder / f"{agent}.zip", folder / f"{agent}_obs_norm.npz"
             if model.is_file():
                 _DIRECTORS[key] = SB3Checkpoint(
@@ -175,11 +166,51 @@ class PAADAttack(_Attack):
                 log.info(
                     "PA-AD: training a director against %r (%d steps)", target, self.director_steps
                 )
-                _DIRECTORS[key] = train_director(
-                    self, game.scenario_id, disruptor.spec, agent, target, victim, folder,
-                    phase=game.phase,
-                )  # fmt: skip
+                plays = game.disruptors[agent].spec
+                part = folder.with_name(f"{folder.name}.part-{os.getpid()}")
+                spec = train_director(
+                    self, game.scenario_id, plays, agent, target, victim, part, phase=game.phase
+                )
+                try:  # in place at once: a worker training the same director may finish first
+                    part.replace(folder)
+                except OSError:
+                    shutil.rmtree(part, ignore_errors=True)
+                _DIRECTORS[key] = SB3Checkpoint(
+                    str(model), spec.algo, str(norm) if norm.is_file() else None, deterministic=True
+                )
         return _DIRECTORS[key]
+
+    def _cached(self, game: Game, agent: str, target: str, victim: WhiteBox) -> tuple[str, Path]:
+        """The director's key (policy fingerprint, scenario, disruptor, settings) and folder."""
+        from advgame.adversaries.sarsa_critic import probe_observations
+
+        disruptor = game.disruptors[agent]
+        size = int(np.prod(game.observation_space(target).shape or ()))
+        parts = [_fingerprint(victim, probe_observations(size))]
+        settings = repr(sorted(asdict(self).items()))
+        std = getattr(victim, "observation_std", None)
+        parts.append(b"" if std is None else np.asarray(std, np.float64).tobytes())
+        text = f"{game.scenario_id}|{agent}|{target}|{disruptor.spec!r}|{game.phase}|{settings}|"
+        key = hashlib.sha256(text.encode() + b"|".join(parts)).hexdigest()[:24]
+        root = Path(self.cache_dir) if self.cache_dir else default_cache_dir()
+        return key, root / f"{game.scenario_id or 'game'}-{key}"
+
+    def learned(self, game: Game, agent: str, victims: Mapping[str, Any]) -> bool:
+        """Whether the director against `victims` is ready (in this process or the cache).
+
+        With `learn`, what `advgame.evaluation.applicable.learn_ahead` asks to train the
+        directors of a table on the executor's workers, in parallel, before the table.
+        """
+        targets = list(getattr(game.disruptors.get(agent), "targets", ()))
+        victim = victims.get(targets[0]) if len(targets) == 1 else None
+        if not isinstance(victim, WhiteBox) or len(game.protagonists) != 1:
+            return True  # nothing to learn: `unplayable` will say why
+        key, folder = self._cached(game, agent, targets[0], victim)
+        return key in _DIRECTORS or (folder / f"{agent}.zip").is_file()
+
+    def learn(self, game: Game, agent: str, victims: Mapping[str, Any]) -> None:
+        """Train (or load) the director against `victims`, as attaching the attack does."""
+        self.build(game.agent_info(agent)).attach(game, victims)
 
 
 def director_info(game: Game, agent: str, target: str) -> AgentInfo:

@@ -15,7 +15,13 @@ from advgame.adversaries.whitebox import WhiteBoxAttackPolicy
 from advgame.core.episodes import build_policies
 from advgame.disruptors import ObservationDisruptor
 from advgame.errors import ConfigError
-from advgame.evaluation import adversary_columns, evaluate, population_jobs, sb3_protagonist
+from advgame.evaluation import (
+    AdversarySetup,
+    adversary_columns,
+    evaluate,
+    population_jobs,
+    sb3_protagonist,
+)
 
 ADV = "observation_adversary"
 
@@ -127,6 +133,30 @@ def test_the_director_is_trained_once_and_the_column_stays_in_budget(
     monkeypatch.setattr(paad_director, "train_director", lambda *a, **k: pytest.fail("trained"))
     again = evaluate(jobs, progress=False)
     assert [r["true_return"] for r in again.rows] == [r["true_return"] for r in table.rows]
+
+
+def test_a_pool_trains_the_directors_ahead_in_its_workers(
+    pendulum_ppo: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    from advgame.adversaries import paad_director
+
+    other = tmp_path / "untrained.zip"
+    PPO("MlpPolicy", gym.make("InvertedPendulum-v5"), seed=1, device="cpu").save(other)
+    cache = tmp_path / "cache"
+    attack = PAADAttack(director_steps=128, cache_dir=str(cache))
+    setups = {"pa-ad": AdversarySetup({"preset": "default"}, {ADV: attack})}
+    prots = {
+        n: sb3_protagonist(p, raw_observations=True) for n, p in (("a", pendulum_ppo), ("b", other))
+    }
+    jobs = population_jobs("InvertedPendulum-v5", prots, setups, seeds=(0, 1, 2))
+    monkeypatch.setattr(paad_director, "train_director", lambda *a, **k: pytest.fail("in main"))
+    table = evaluate(jobs, workers=2, progress=False)  # trained by the workers, loaded here
+    assert len(list(cache.glob("*/observation_adversary.zip"))) == 2  # a director per victim
+    assert not list(cache.glob("*.part-*"))
+    assert len(table.rows) == 6 and all(r["clipped"] == 0 for r in table.rows)
 
 
 def test_bad_uses_are_clear_errors() -> None:

@@ -16,12 +16,13 @@ and records these as not applicable (`PayoffTable.not_applicable`, "n/a" in repo
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from advgame.errors import ConfigError
 from advgame.evaluation.jobs import EvalJob
 
-__all__ = ["not_applicable"]
+__all__ = ["learn_ahead", "not_applicable"]
 
 
 def _asks(job: EvalJob) -> bool:
@@ -83,3 +84,71 @@ def _reason(job: EvalJob, game: Any, victims: Mapping[str, Any]) -> str | None:
         if reason is not None:
             return str(reason)
     return None
+
+
+@dataclass(frozen=True)
+class _Learn:
+    """What one worker learns ahead of a table: `spec`'s per-protagonist model for one row."""
+
+    scenario: str
+    make_kwargs: Mapping[str, Any]
+    protagonist_spec: Any
+    agent: str
+    spec: Any
+
+
+def learn_ahead(
+    jobs: Sequence[EvalJob], *, workers: int, executor: str, address: str | None = None
+) -> int:
+    """Train what columns learn per protagonist (PA-AD's directors) on the executor, in parallel.
+
+    An adversary spec that learns something per victim says so through two optional methods,
+    ``learned(game, agent, victims) -> bool`` and ``learn(game, agent, victims)`` (which
+    trains it into a cache that attaching the spec reads; `advgame.adversaries.PAADAttack`
+    has them). Attaching would learn it anyway, one row after another in this process
+    (`not_applicable` attaches every column to every row); with more than one worker this
+    learns every missing one first as executor units. Returns how many were learned.
+    """
+    from advgame.core.registry import make
+    from advgame.evaluation.executor import run_units
+
+    if workers < 2 and executor == "local":
+        return 0
+    units: dict[tuple[str, ...], _Learn] = {}
+    games: dict[tuple[str, str], Any] = {}
+    try:
+        for job in jobs:
+            for agent, spec in job.adversary_specs.items():
+                if not (callable(getattr(spec, "learned", None)) and hasattr(spec, "learn")):
+                    continue
+                key = (job.scenario, repr(sorted(job.make_kwargs.items())))
+                if key not in games:
+                    games[key] = make(job.scenario, **dict(job.make_kwargs))
+                unit_id = (*key, repr(job.protagonist_spec), agent, repr(spec))  # one per model
+                if unit_id in units:
+                    continue
+                victims = _protagonists(games[key], job.protagonist_spec)
+                if not spec.learned(games[key], agent, victims):
+                    units[unit_id] = _Learn(
+                        job.scenario, dict(job.make_kwargs), job.protagonist_spec, agent, spec
+                    )
+    finally:
+        for game in games.values():
+            game.close()
+    if units:
+        run_units(_learn, list(units.values()), executor=executor, workers=workers, address=address)
+    return len(units)
+
+
+def _learn(unit: _Learn) -> None:
+    """A worker's unit of `learn_ahead`: build the row's game and victims, then learn."""
+    import torch
+
+    from advgame.core.registry import make
+
+    torch.set_num_threads(1)
+    game = make(unit.scenario, **dict(unit.make_kwargs))
+    try:
+        unit.spec.learn(game, unit.agent, _protagonists(game, unit.protagonist_spec))
+    finally:
+        game.close()

@@ -19,7 +19,7 @@ from typing import Any
 
 from advgame.core.policy import WhiteBox, WhiteBoxForwarder
 from advgame.errors import ConfigError
-from advgame.evaluation.applicable import not_applicable
+from advgame.evaluation.applicable import learn_ahead, not_applicable
 from advgame.evaluation.batched import LOCKSTEP_EPISODES
 from advgame.evaluation.executor import EXECUTORS, first_action, run_units, write_timings
 from advgame.evaluation.jobs import EvalJob, lockstep_groups, split_seeds, unit_size
@@ -151,7 +151,9 @@ def evaluate(
 ) -> PayoffTable:
     """Run `jobs`; return their rows, in job order (whatever the workers), as a `PayoffTable`.
 
-    First every column is asked whether it can play its row (`not_applicable`): cells it
+    With a pool or Ray, what columns learn per protagonist (PA-AD's directors) is learned
+    first on the workers (`learn_ahead`). Then every column is asked whether it can play its
+    row (`not_applicable`): cells it
     cannot play (a white-box attack against a fixed controller) are not run and are recorded
     in the table's `PayoffTable.not_applicable` with the reason, before any job is queued.
 
@@ -188,6 +190,9 @@ def evaluate(
     if type(workers) is not int or workers < 1:
         raise ConfigError(f"workers must be an int >= 1, got {workers!r}.")
     kind, address = (executor, address) if executor is not None else _DEFAULT_EXECUTOR
+    learned = learn_ahead(jobs, workers=workers, executor=kind, address=address)
+    if learned:
+        log.info("learned %d per-protagonist attack model(s) on %d worker(s)", learned, workers)
     na = not_applicable(jobs)
     if na:
         log.info("%d cell(s) not applicable, not played: %s", len(na), sorted(na))
