@@ -157,22 +157,11 @@ class RobustSarsaAttack(_Attack):
         Learning plays ``samples`` steps of `game`'s scenario (nominal) and fits the network
         (seconds to a minute); the result is written to the cache folder.
         """
-        from advgame.adversaries.sarsa_critic import QNetwork, fit_sarsa, probe_observations
+        from advgame.adversaries.sarsa_critic import QNetwork, fit_sarsa
 
-        size = int(np.prod(game.observation_space(target).shape or ()))
-        with _no_grad():
-            probe = probe_observations(size)
-            parts = [victim.action_mean(probe).numpy().tobytes()]
-            std = victim.action_std()
-        parts.append(b"" if std is None else std.numpy().tobytes())
-        settings = repr(sorted((k, v) for k, v in asdict(self).items() if k in _FIT_FIELDS))
-        settings += "|cost" if self.signal == "cost" else ""
-        text = f"{game.scenario_id}|{target}|{settings}|".encode() + b"|".join(parts)
-        key = hashlib.sha256(text).hexdigest()[:24]
+        key, path = self._cached(game, target, victim)
         _mark(victim, key)
         if key not in _CRITICS:
-            root = Path(self.cache_dir) if self.cache_dir else default_cache_dir()
-            path = root / f"{game.scenario_id or 'game'}-{key}.pt"
             if path.is_file():
                 _CRITICS[key] = QNetwork.load(path)
             else:
@@ -186,6 +175,43 @@ class RobustSarsaAttack(_Attack):
                 )
                 _CRITICS[key].save(path)
         return _CRITICS[key]
+
+    def _cached(self, game: Game, target: str, victim: WhiteBox) -> tuple[str, Path]:
+        """The critic's key (policy fingerprint, scenario, settings) and cache file."""
+        from advgame.adversaries.sarsa_critic import probe_observations
+
+        size = int(np.prod(game.observation_space(target).shape or ()))
+        with _no_grad():
+            probe = probe_observations(size)
+            parts = [victim.action_mean(probe).numpy().tobytes()]
+            std = victim.action_std()
+        parts.append(b"" if std is None else std.numpy().tobytes())
+        settings = repr(sorted((k, v) for k, v in asdict(self).items() if k in _FIT_FIELDS))
+        settings += "|cost" if self.signal == "cost" else ""
+        text = f"{game.scenario_id}|{target}|{settings}|".encode() + b"|".join(parts)
+        key = hashlib.sha256(text).hexdigest()[:24]
+        root = Path(self.cache_dir) if self.cache_dir else default_cache_dir()
+        return key, root / f"{game.scenario_id or 'game'}-{key}.pt"
+
+    def learned(self, game: Game, agent: str, victims: Mapping[str, Any]) -> bool:
+        """Whether every target's ``Q^π`` is ready (in this process or the cache).
+
+        With `learn`, what `advgame.evaluation.applicable.learn_ahead` asks to fit the critics
+        of a table on the executor's workers, in parallel, before the table.
+        """
+        if len(game.protagonists) != 1 or not game.scenario_id:
+            return True  # nothing to learn: `unplayable` will say why
+        for target in getattr(game.disruptors.get(agent), "targets", ()):
+            victim = victims.get(target)
+            if isinstance(victim, WhiteBox):
+                key, path = self._cached(game, target, victim)
+                if key not in _CRITICS and not path.is_file():
+                    return False
+        return True
+
+    def learn(self, game: Game, agent: str, victims: Mapping[str, Any]) -> None:
+        """Fit (or load) the critics of `victims`, as attaching the attack does."""
+        self.build(game.agent_info(agent)).attach(game, victims)
 
 
 _FIT_FIELDS: tuple[str, ...] = ("samples", "epochs", "batch_size", "hidden", "gamma", "lr")

@@ -152,6 +152,7 @@ def test_a_pool_trains_the_directors_ahead_in_its_workers(
         n: sb3_protagonist(p, raw_observations=True) for n, p in (("a", pendulum_ppo), ("b", other))
     }
     jobs = population_jobs("InvertedPendulum-v5", prots, setups, seeds=(0, 1, 2))
+    monkeypatch.setattr(paad, "_DIRECTORS", {})  # none trained in this process yet
     monkeypatch.setattr(paad_director, "train_director", lambda *a, **k: pytest.fail("in main"))
     table = evaluate(jobs, workers=2, progress=False)  # trained by the workers, loaded here
     assert len(list(cache.glob("*/observation_adversary.zip"))) == 2  # a director per victim

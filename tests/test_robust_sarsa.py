@@ -54,6 +54,28 @@ def test_the_critic_is_learned_once_and_the_attack_stays_in_budget(
     assert [r["true_return"] for r in again.rows] == [r["true_return"] for r in table.rows]
 
 
+def test_a_pool_fits_the_critics_ahead_in_its_workers(
+    pendulum: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    other = tmp_path / "untrained.zip"
+    PPO("MlpPolicy", gym.make("InvertedPendulum-v5"), seed=1, device="cpu").save(other)
+    cache = tmp_path / "cache"
+    prots = {
+        n: sb3_protagonist(p, raw_observations=True) for n, p in (("a", pendulum), ("b", other))
+    }
+    jobs = population_jobs("InvertedPendulum-v5", prots, _setups(cache), seeds=(0, 1))
+    from advgame.adversaries import robust_sarsa
+
+    monkeypatch.setattr(robust_sarsa, "_CRITICS", {})  # none fitted in this process yet
+    monkeypatch.setattr(sarsa_critic, "fit_sarsa", lambda *a, **k: pytest.fail("fitted in main"))
+    table = evaluate(jobs, workers=2, progress=False)  # fitted by the workers, loaded here
+    assert len(list(cache.glob("*.pt"))) == 2
+    assert len(table.rows) == 8
+
+
 def test_the_learned_q_ranks_states_by_their_returns(pendulum: Path) -> None:
     """Q^π(s, μ(s)) of the start states tracks their discounted returns (Sarsa learned Q^π)."""
     from advgame.core.registry import make
