@@ -187,7 +187,7 @@ class PAADAttack(_Attack):
         disruptor = game.disruptors[agent]
         size = int(np.prod(game.observation_space(target).shape or ()))
         parts = [_fingerprint(victim, probe_observations(size))]
-        settings = repr(sorted(asdict(self).items()))
+        settings = repr(sorted((k, v) for k, v in asdict(self).items() if k != "cache_dir"))
         std = getattr(victim, "observation_std", None)
         parts.append(b"" if std is None else np.asarray(std, np.float64).tobytes())
         text = f"{game.scenario_id}|{agent}|{target}|{disruptor.spec!r}|{game.phase}|{settings}|"
