@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -49,6 +50,20 @@ def pendulum_ppo(tmp_path_factory: pytest.TempPathFactory) -> Path:
     env.close()
     torch.set_num_threads(before)
     return path
+
+
+@pytest.fixture(scope="session")
+def pendulum_pair(pendulum_ppo: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """Two different InvertedPendulum-v5 victims (`pendulum_ppo` and an untrained PPO, seed 1)."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    from advgame.evaluation import sb3_protagonist
+
+    other = tmp_path_factory.mktemp("pendulum-untrained") / "ppo.zip"
+    PPO("MlpPolicy", gym.make("InvertedPendulum-v5"), seed=1, device="cpu").save(other)
+    paths = {"a": pendulum_ppo, "b": other}
+    return {n: sb3_protagonist(p, raw_observations=True) for n, p in paths.items()}
 
 
 @pytest.fixture(scope="session")

@@ -136,22 +136,14 @@ def test_the_director_is_trained_once_and_the_column_stays_in_budget(
 
 
 def test_a_pool_trains_the_directors_ahead_in_its_workers(
-    pendulum_ppo: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    pendulum_pair: dict, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import gymnasium as gym
-    from stable_baselines3 import PPO
-
     from advgame.adversaries import paad_director
 
-    other = tmp_path / "untrained.zip"
-    PPO("MlpPolicy", gym.make("InvertedPendulum-v5"), seed=1, device="cpu").save(other)
     cache = tmp_path / "cache"
     attack = PAADAttack(director_steps=128, cache_dir=str(cache))
     setups = {"pa-ad": AdversarySetup({"preset": "default"}, {ADV: attack})}
-    prots = {
-        n: sb3_protagonist(p, raw_observations=True) for n, p in (("a", pendulum_ppo), ("b", other))
-    }
-    jobs = population_jobs("InvertedPendulum-v5", prots, setups, seeds=(0, 1, 2))
+    jobs = population_jobs("InvertedPendulum-v5", pendulum_pair, setups, seeds=(0, 1, 2))
     monkeypatch.setattr(paad, "_DIRECTORS", {})  # none trained in this process yet
     monkeypatch.setattr(paad_director, "train_director", lambda *a, **k: pytest.fail("in main"))
     table = evaluate(jobs, workers=2, progress=False)  # trained by the workers, loaded here

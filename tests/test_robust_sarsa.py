@@ -55,18 +55,10 @@ def test_the_critic_is_learned_once_and_the_attack_stays_in_budget(
 
 
 def test_a_pool_fits_the_critics_ahead_in_its_workers(
-    pendulum: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    pendulum_pair: dict, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import gymnasium as gym
-    from stable_baselines3 import PPO
-
-    other = tmp_path / "untrained.zip"
-    PPO("MlpPolicy", gym.make("InvertedPendulum-v5"), seed=1, device="cpu").save(other)
     cache = tmp_path / "cache"
-    prots = {
-        n: sb3_protagonist(p, raw_observations=True) for n, p in (("a", pendulum), ("b", other))
-    }
-    jobs = population_jobs("InvertedPendulum-v5", prots, _setups(cache), seeds=(0, 1))
+    jobs = population_jobs("InvertedPendulum-v5", pendulum_pair, _setups(cache), seeds=(0, 1))
     from advgame.adversaries import robust_sarsa
 
     monkeypatch.setattr(robust_sarsa, "_CRITICS", {})  # none fitted in this process yet
