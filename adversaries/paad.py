@@ -39,7 +39,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from advgame.adversaries.whitebox import NumpyScorer, WhiteBoxAttackPolicy, _Attack
+from advgame.adversaries.whitebox import (
+    NumpyScorer,
+    WhiteBoxAttackPolicy,
+    _Attack,
+    cache_root,
+    victim_fingerprint,
+)
 from advgame.core.policy import AgentInfo, WhiteBox, act_batch, as_policy, numpy_net_of
 from advgame.errors import ConfigError
 
@@ -59,8 +65,7 @@ _TINY = 1e-8
 
 def default_cache_dir() -> Path:
     """``$ADVGAME_CACHE/paad``, else ``~/.cache/advgame/paad``."""
-    root = os.environ.get("ADVGAME_CACHE") or Path.home() / ".cache" / "advgame"
-    return Path(root) / "paad"
+    return cache_root() / "paad"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -158,35 +163,29 @@ class PAADAttack(_Attack):
         key, folder = self._cached(game, agent, target, victim)
         if key not in _DIRECTORS:
             model, norm = folder / f"{agent}.zip", folder / f"{agent}_obs_norm.npz"
-            if model.is_file():
-                _DIRECTORS[key] = SB3Checkpoint(
-                    str(model), "ppo", str(norm) if norm.is_file() else None, deterministic=True
-                )
-            else:
+            if not model.is_file():
                 log.info(
                     "PA-AD: training a director against %r (%d steps)", target, self.director_steps
                 )
                 plays = game.disruptors[agent].spec
                 part = folder.with_name(f"{folder.name}.part-{os.getpid()}")
-                spec = train_director(
+                train_director(
                     self, game.scenario_id, plays, agent, target, victim, part, phase=game.phase
                 )
                 try:  # in place at once: a worker training the same director may finish first
                     part.replace(folder)
                 except OSError:
                     shutil.rmtree(part, ignore_errors=True)
-                _DIRECTORS[key] = SB3Checkpoint(
-                    str(model), spec.algo, str(norm) if norm.is_file() else None, deterministic=True
-                )
+            _DIRECTORS[key] = SB3Checkpoint(
+                str(model), "ppo", str(norm) if norm.is_file() else None, deterministic=True
+            )
         return _DIRECTORS[key]
 
     def _cached(self, game: Game, agent: str, target: str, victim: WhiteBox) -> tuple[str, Path]:
         """The director's key (policy fingerprint, scenario, disruptor, settings) and folder."""
-        from advgame.adversaries.sarsa_critic import probe_observations
-
         disruptor = game.disruptors[agent]
         size = int(np.prod(game.observation_space(target).shape or ()))
-        parts = [_fingerprint(victim, probe_observations(size))]
+        parts = victim_fingerprint(victim, size)
         settings = repr(sorted((k, v) for k, v in asdict(self).items() if k != "cache_dir"))
         std = getattr(victim, "observation_std", None)
         parts.append(b"" if std is None else np.asarray(std, np.float64).tobytes())
@@ -208,10 +207,6 @@ class PAADAttack(_Attack):
         key, folder = self._cached(game, agent, targets[0], victim)
         return key in _DIRECTORS or (folder / f"{agent}.zip").is_file()
 
-    def learn(self, game: Game, agent: str, victims: Mapping[str, Any]) -> None:
-        """Train (or load) the director against `victims`, as attaching the attack does."""
-        self.build(game.agent_info(agent)).attach(game, victims)
-
 
 def director_info(game: Game, agent: str, target: str) -> AgentInfo:
     """What a director of `agent` plays: its observations, a direction in `target`'s actions."""
@@ -225,16 +220,6 @@ def _unit(directions: np.ndarray) -> np.ndarray:
     """Each row of `directions` scaled to length 1 (a zero row stays zero)."""
     d = np.asarray(directions, dtype=np.float64)
     return d / (np.linalg.norm(d, axis=-1, keepdims=True) + _TINY)
-
-
-def _fingerprint(victim: Any, probe: Any) -> bytes:
-    """The victim's mean actions (and std) on fixed probe observations."""
-    import torch
-
-    with torch.no_grad():
-        out = victim.action_mean(probe).numpy().tobytes()
-        std = victim.action_std()
-    return out + (b"" if std is None else std.numpy().tobytes())
 
 
 class _PAADPolicy(WhiteBoxAttackPolicy):

@@ -61,9 +61,10 @@ class DirectorEnv(VecEnvWrapper):
         """Walk every view's perturbation towards its direction, then step the views with them."""
         for pol, d in zip(self.attackers, np.asarray(actions, dtype=np.float64), strict=True):
             pol.direction = np.clip(d.reshape(-1), -1.0, 1.0)
-        head = self.attackers[0]
-        blocks = [head._attack_rows(self.attackers, t) for t in head.disruptor.targets]
-        self.venv.step_async(np.concatenate(blocks, axis=1).astype(np.float32))
+        # the base walk, not `_PAADPolicy.act_group`: the directions are the learner's actions,
+        # and the walk reads each game's true observation itself
+        blank = [None] * len(self.attackers)
+        self.venv.step_async(WhiteBoxAttackPolicy.act_group(self.attackers, blank))
 
     def step_wait(self) -> Any:
         """The views' step results."""

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import os
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -36,7 +35,13 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from advgame.adversaries.whitebox import NumpyScorer, WhiteBoxAttackPolicy, _Attack
+from advgame.adversaries.whitebox import (
+    NumpyScorer,
+    WhiteBoxAttackPolicy,
+    _Attack,
+    cache_root,
+    victim_fingerprint,
+)
 from advgame.core.policy import WhiteBox, numpy_net_of
 from advgame.errors import ConfigError
 
@@ -54,8 +59,7 @@ _CRITICS: dict[str, Any] = {}
 
 def default_cache_dir() -> Path:
     """``$ADVGAME_CACHE/robust_sarsa``, else ``~/.cache/advgame/robust_sarsa``."""
-    root = os.environ.get("ADVGAME_CACHE") or Path.home() / ".cache" / "advgame"
-    return Path(root) / "robust_sarsa"
+    return cache_root() / "robust_sarsa"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -178,14 +182,8 @@ class RobustSarsaAttack(_Attack):
 
     def _cached(self, game: Game, target: str, victim: WhiteBox) -> tuple[str, Path]:
         """The critic's key (policy fingerprint, scenario, settings) and cache file."""
-        from advgame.adversaries.sarsa_critic import probe_observations
-
         size = int(np.prod(game.observation_space(target).shape or ()))
-        with _no_grad():
-            probe = probe_observations(size)
-            parts = [victim.action_mean(probe).numpy().tobytes()]
-            std = victim.action_std()
-        parts.append(b"" if std is None else std.numpy().tobytes())
+        parts = victim_fingerprint(victim, size)
         settings = repr(sorted((k, v) for k, v in asdict(self).items() if k in _FIT_FIELDS))
         settings += "|cost" if self.signal == "cost" else ""
         text = f"{game.scenario_id}|{target}|{settings}|".encode() + b"|".join(parts)
@@ -208,10 +206,6 @@ class RobustSarsaAttack(_Attack):
                 if key not in _CRITICS and not path.is_file():
                     return False
         return True
-
-    def learn(self, game: Game, agent: str, victims: Mapping[str, Any]) -> None:
-        """Fit (or load) the critics of `victims`, as attaching the attack does."""
-        self.build(game.agent_info(agent)).attach(game, victims)
 
 
 _FIT_FIELDS: tuple[str, ...] = ("samples", "epochs", "batch_size", "hidden", "gamma", "lr")
@@ -276,9 +270,3 @@ def _key_of(victim: Any) -> str:
     if key is None or key not in _CRITICS:
         raise ConfigError("RobustSarsaAttack played a victim it was not attached to.")
     return str(key)
-
-
-def _no_grad() -> Any:
-    import torch
-
-    return torch.no_grad()

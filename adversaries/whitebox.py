@@ -26,8 +26,10 @@ the disruptor still clips and counts. Gradients are taken with respect to ``u`` 
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -41,7 +43,14 @@ if TYPE_CHECKING:
 
     from advgame.core.game import Game
 
-__all__ = ["CriticAttack", "MADAttack", "PGDAttack", "WhiteBoxAttackPolicy"]
+__all__ = [
+    "CriticAttack",
+    "MADAttack",
+    "PGDAttack",
+    "WhiteBoxAttackPolicy",
+    "cache_root",
+    "victim_fingerprint",
+]
 
 _RADIUS = 1.0 - 1e-6
 """L2 attacks stay this far inside the unit ball: rounding to float32 must not leave it."""
@@ -54,6 +63,27 @@ NumpyScorer = Callable[[np.ndarray], tuple[np.ndarray, Callable[[], np.ndarray]]
 
 Walk = Callable[[np.ndarray], tuple[np.ndarray, Callable[[], np.ndarray]]]
 """The adversary's actions ``[N, k]`` -> (objective per row, float64; its gradient in them)."""
+
+
+def cache_root() -> Path:
+    """Where attacks keep what they learn per victim: ``$ADVGAME_CACHE``, else ``~/.cache/advgame``."""
+    return Path(os.environ.get("ADVGAME_CACHE") or Path.home() / ".cache" / "advgame")
+
+
+def victim_fingerprint(victim: WhiteBox, size: int) -> list[bytes]:
+    """The victim's mean actions on fixed probe observations of `size`, and its action std.
+
+    What attacks that learn per victim (Robust Sarsa's critic, PA-AD's director) key their
+    cache with: two policies with these equal act alike on the probes.
+    """
+    import torch
+
+    from advgame.adversaries.sarsa_critic import probe_observations
+
+    with torch.no_grad():
+        actions = victim.action_mean(probe_observations(size)).numpy().tobytes()
+        std = victim.action_std()
+    return [actions, b"" if std is None else std.numpy().tobytes()]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -124,6 +154,14 @@ class _Attack:
     def build(self, info: AgentInfo) -> WhiteBoxAttackPolicy:
         """The attack for observation adversary `info.agent` (attached to its victims later)."""
         return WhiteBoxAttackPolicy(self, info)
+
+    def learn(self, game: Game, agent: str, victims: Mapping[str, Any]) -> None:
+        """Learn (or load) what attaching this attack to `victims` learns, as attaching does.
+
+        With ``learned(game, agent, victims) -> bool``, which attacks that learn per victim
+        define, what `advgame.evaluation.applicable.learn_ahead` runs on a table's workers.
+        """
+        self.build(game.agent_info(agent)).attach(game, victims)
 
     def unplayable(self, game: Game, agent: str, victims: Mapping[str, Any]) -> str | None:
         """Why this attack cannot play `agent` of `game` against `victims`, or None if it can.
