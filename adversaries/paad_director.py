@@ -14,7 +14,7 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from advgame.adversaries.paad import PAADAttack, _PAADPolicy, director_info
-from advgame.adversaries.whitebox import WhiteBoxAttackPolicy
+from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
 from advgame.errors import ConfigError
 
 __all__ = ["DirectorEnv", "train_director"]

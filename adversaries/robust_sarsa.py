@@ -35,13 +35,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from advgame.adversaries.whitebox import (
-    NumpyScorer,
-    WhiteBoxAttackPolicy,
-    _Attack,
-    cache_root,
-    victim_fingerprint,
-)
+from advgame.adversaries.whitebox import _Attack, cache_root, victim_fingerprint
+from advgame.adversaries.whitebox_walk import NumpyScorer, WhiteBoxAttackPolicy
 from advgame.core.policy import WhiteBox, numpy_net_of
 from advgame.errors import ConfigError
 

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from advgame.adversaries import CriticAttack, MADAttack, RobustSarsaAttack
-from advgame.adversaries.whitebox import WhiteBoxAttackPolicy
+from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
 from advgame.evaluation import (
     AdversarySetup,
     evaluate,

@@ -12,7 +12,7 @@ import advgame
 from advgame import zoo
 from advgame.adversaries import MaxCostAttack, RobustSarsaAttack
 from advgame.adversaries.specs import adversary_spec
-from advgame.adversaries.whitebox import WhiteBoxAttackPolicy
+from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
 from advgame.core.episodes import rollout
 from advgame.errors import ConfigError
 from advgame.evaluation import adversary_columns

@@ -13,7 +13,8 @@ from torch import nn
 
 import advgame
 from advgame.adversaries import MaxCostAttack, RobustSarsaAttack
-from advgame.adversaries.whitebox import CriticAttack, MADAttack, WhiteBoxAttackPolicy
+from advgame.adversaries.whitebox import CriticAttack, MADAttack
+from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
 from advgame.core.episodes import build_policies
 from advgame.core.numpy_net import NumpyNet
 from advgame.disruptors import ObservationDisruptor

@@ -11,7 +11,7 @@ import torch
 
 import advgame
 from advgame.adversaries import PAADAttack, paad, specs
-from advgame.adversaries.whitebox import WhiteBoxAttackPolicy
+from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
 from advgame.core.episodes import build_policies
 from advgame.disruptors import ObservationDisruptor
 from advgame.errors import ConfigError
