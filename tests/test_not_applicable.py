@@ -47,6 +47,40 @@ def test_an_attack_cannot_play_a_controller_and_says_why(model: Path) -> None:
     assert "white-box access" in na[("still", "attack mad")]
 
 
+class _Learns:
+    """A column that learns per victim (as PA-AD does) and may refuse a row; never played."""
+
+    def build(self, info: object) -> object:
+        raise AssertionError("the checks only ask; they never build the adversary")
+
+    def learned(self, game: object, agent: str, victims: dict) -> bool:
+        return True  # already cached: learn_ahead queues nothing
+
+    def learn(self, game: object, agent: str, victims: dict) -> None:
+        raise AssertionError("learned() said there is nothing to learn")
+
+    def unplayable(self, game: object, agent: str, victims: dict) -> str | None:
+        return None
+
+
+def test_both_checks_build_each_row_once(model: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from advgame.evaluation import applicable
+
+    built: list[object] = []
+    real = applicable._protagonists
+    monkeypatch.setattr(applicable, "_protagonists", lambda g, s: built.append(s) or real(g, s))
+    setups = {
+        f"learns {i}": AdversarySetup({"preset": "default"}, {"observation_adversary": _Learns()})
+        for i in range(3)
+    }
+    prots = {"still": still, "ppo": sb3_protagonist(model, raw_observations=True)}
+    jobs = population_jobs("InvertedPendulum-v5", prots, setups, seeds=(0,))
+    with applicable.Rows() as rows:
+        assert applicable.learn_ahead(jobs, workers=2, executor="local", rows=rows) == 0
+        assert applicable.not_applicable(jobs, rows) == {}
+    assert len(built) == 2  # one build per row, not per column nor per check
+
+
 def test_evaluate_plays_the_other_cells_and_records_the_reason(model: Path) -> None:
     prots = {"still": still, "ppo": sb3_protagonist(model, raw_observations=True)}
     jobs = population_jobs("InvertedPendulum-v5", prots, _setups(), seeds=(0, 1))

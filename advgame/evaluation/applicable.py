@@ -22,7 +22,7 @@ from typing import Any
 from advgame.errors import ConfigError
 from advgame.evaluation.jobs import EvalJob
 
-__all__ = ["learn_ahead", "not_applicable"]
+__all__ = ["Rows", "learn_ahead", "not_applicable"]
 
 
 def _asks(job: EvalJob) -> bool:
@@ -30,34 +30,67 @@ def _asks(job: EvalJob) -> bool:
     return any(callable(getattr(s, "unplayable", None)) for s in job.adversary_specs.values())
 
 
-def not_applicable(jobs: Sequence[EvalJob]) -> dict[tuple[str, str], str]:
+class Rows:
+    """The games and protagonists a table's checks build, each once, shared by both checks.
+
+    One game per scenario and its `make` arguments, one set of protagonist policies per row of
+    it (a checkpoint is loaded once however many columns ask). `advgame.evaluation.evaluate`
+    hands one to `learn_ahead` and then `not_applicable`; close it (or use ``with``) to close
+    the games.
+    """
+
+    def __init__(self) -> None:
+        self._games: dict[tuple[str, str], Any] = {}
+        self._victims: dict[tuple[str, str, str], dict[str, Any]] = {}
+
+    def game(self, job: EvalJob) -> Any:
+        """The game of `job`'s column (made on first use)."""
+        from advgame.core.registry import make
+
+        key = (job.scenario, repr(sorted(job.make_kwargs.items())))
+        if key not in self._games:
+            self._games[key] = make(job.scenario, **dict(job.make_kwargs))
+        return self._games[key]
+
+    def victims(self, job: EvalJob) -> dict[str, Any]:
+        """`job`'s protagonist policies built for its game, as the evaluation builds them."""
+        key = (job.scenario, repr(sorted(job.make_kwargs.items())), job.protagonist)
+        if key not in self._victims:
+            self._victims[key] = _protagonists(self.game(job), job.protagonist_spec)
+        return self._victims[key]
+
+    def close(self) -> None:
+        """Close every game made."""
+        for game in self._games.values():
+            game.close()
+        self._games.clear()
+
+    def __enter__(self) -> Rows:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def not_applicable(jobs: Sequence[EvalJob], rows: Rows | None = None) -> dict[tuple[str, str], str]:
     """``{(protagonist, adversary): reason}`` for the jobs whose column cannot play their row.
 
     Each column's game is made once and each protagonist built once per scenario (a
-    checkpoint is loaded once); only jobs with an adversary spec that has ``unplayable`` are
-    asked, so tables of noise and learned columns cost nothing here.
+    checkpoint is loaded once; with `rows`, the games and protagonists `learn_ahead` already
+    built are reused); only jobs with an adversary spec that has ``unplayable`` are asked, so
+    tables of noise and learned columns cost nothing here.
     """
-    from advgame.core.registry import make
-
-    asked = [j for j in jobs if _asks(j)]
-    games: dict[tuple[str, str], Any] = {}
-    victims: dict[tuple[str, str], dict[str, Any]] = {}
+    own = rows is None
+    rows = Rows() if rows is None else rows
     out: dict[tuple[str, str], str] = {}
     try:
-        for job in asked:
-            key = (job.scenario, repr(sorted(job.make_kwargs.items())))
-            if key not in games:
-                games[key] = make(job.scenario, **dict(job.make_kwargs))
-            game = games[key]
-            row = (job.scenario, job.protagonist)
-            if row not in victims:
-                victims[row] = _protagonists(game, job.protagonist_spec)
-            reason = _reason(job, game, victims[row])
+        for job in (j for j in jobs if _asks(j)):
+            reason = _reason(job, rows.game(job), rows.victims(job))
             if reason is not None:
                 out[(job.protagonist, job.adversary)] = reason
     finally:
-        for game in games.values():
-            game.close()
+        if own:
+            rows.close()
     return out
 
 
@@ -98,7 +131,12 @@ class _Learn:
 
 
 def learn_ahead(
-    jobs: Sequence[EvalJob], *, workers: int, executor: str, address: str | None = None
+    jobs: Sequence[EvalJob],
+    *,
+    workers: int,
+    executor: str,
+    address: str | None = None,
+    rows: Rows | None = None,
 ) -> int:
     """Train what columns learn per protagonist (PA-AD's directors) on the executor, in parallel.
 
@@ -107,34 +145,32 @@ def learn_ahead(
     trains it into a cache that attaching the spec reads; `advgame.adversaries.PAADAttack`
     has them). Attaching would learn it anyway, one row after another in this process
     (`not_applicable` attaches every column to every row); with more than one worker this
-    learns every missing one first as executor units. Returns how many were learned.
+    learns every missing one first as executor units. `rows`: the games and protagonists to
+    ask with (`not_applicable` reuses them). Returns how many were learned.
     """
-    from advgame.core.registry import make
     from advgame.evaluation.executor import run_units
 
     if workers < 2 and executor == "local":
         return 0
+    own = rows is None
+    rows = Rows() if rows is None else rows
     units: dict[tuple[str, ...], _Learn] = {}
-    games: dict[tuple[str, str], Any] = {}
     try:
         for job in jobs:
             for agent, spec in job.adversary_specs.items():
                 if not (callable(getattr(spec, "learned", None)) and hasattr(spec, "learn")):
                     continue
-                key = (job.scenario, repr(sorted(job.make_kwargs.items())))
-                if key not in games:
-                    games[key] = make(job.scenario, **dict(job.make_kwargs))
-                unit_id = (*key, repr(job.protagonist_spec), agent, repr(spec))  # one per model
-                if unit_id in units:
+                unit_id = (job.scenario, repr(sorted(job.make_kwargs.items())),
+                           repr(job.protagonist_spec), agent, repr(spec))  # fmt: skip
+                if unit_id in units:  # one unit per model
                     continue
-                victims = _protagonists(games[key], job.protagonist_spec)
-                if not spec.learned(games[key], agent, victims):
+                if not spec.learned(rows.game(job), agent, rows.victims(job)):
                     units[unit_id] = _Learn(
                         job.scenario, dict(job.make_kwargs), job.protagonist_spec, agent, spec
                     )
     finally:
-        for game in games.values():
-            game.close()
+        if own:
+            rows.close()
     if units:
         run_units(_learn, list(units.values()), executor=executor, workers=workers, address=address)
     return len(units)

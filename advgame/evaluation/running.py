@@ -19,7 +19,7 @@ from typing import Any
 
 from advgame.core.policy import WhiteBox, WhiteBoxForwarder
 from advgame.errors import ConfigError
-from advgame.evaluation.applicable import learn_ahead, not_applicable
+from advgame.evaluation.applicable import Rows, learn_ahead, not_applicable
 from advgame.evaluation.batched import LOCKSTEP_EPISODES
 from advgame.evaluation.executor import EXECUTORS, first_action, run_units, write_timings
 from advgame.evaluation.jobs import EvalJob, lockstep_groups, split_seeds, unit_size
@@ -190,10 +190,11 @@ def evaluate(
     if type(workers) is not int or workers < 1:
         raise ConfigError(f"workers must be an int >= 1, got {workers!r}.")
     kind, address = (executor, address) if executor is not None else _DEFAULT_EXECUTOR
-    learned = learn_ahead(jobs, workers=workers, executor=kind, address=address)
-    if learned:
-        log.info("learned %d per-protagonist attack model(s) on %d worker(s)", learned, workers)
-    na = not_applicable(jobs)
+    with Rows() as rows:  # each row's protagonists built once for both checks
+        learned = learn_ahead(jobs, workers=workers, executor=kind, address=address, rows=rows)
+        if learned:
+            log.info("learned %d per-protagonist attack model(s) on %d worker(s)", learned, workers)
+        na = not_applicable(jobs, rows)
     if na:
         log.info("%d cell(s) not applicable, not played: %s", len(na), sorted(na))
         jobs = [j for j in jobs if (j.protagonist, j.adversary) not in na]
