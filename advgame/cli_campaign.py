@@ -83,11 +83,13 @@ def _cmd_zoo(args: argparse.Namespace) -> int:
     if not found:
         print(f"no released agents in {root}")
         return 0
-    print(
-        f"{'id':<22} {'scenario':<14} {'steps':>9} {'seed':>4} {'natural':>8} {'worst':>8}  worst attack"
-    )
+    wid = max(len("id"), *(len(e.id) for e in found))  # columns as wide as the longest name
+    wsc = max(len("scenario"), *(len(e.scenario) for e in found))
+    print(f"{'id':<{wid}} {'scenario':<{wsc}} {'steps':>9} {'seed':>4} {'natural':>8} "
+          f"{'worst':>8}  worst attack")  # fmt: skip
     for e in found:
         zoo.verify(e, root)
-        print(f"{e.id:<22} {e.scenario:<14} {e.steps:>9} {e.seed:>4} {e.natural_return:>8.1f} "
-              f"{e.worst_attack_return:>8.1f}  {e.worst_attack} ({e.threat})")  # fmt: skip
+        print(f"{e.id:<{wid}} {e.scenario:<{wsc}} {e.steps:>9} {e.seed:>4} "
+              f"{e.natural_return:>8.1f} {e.worst_attack_return:>8.1f}  "
+              f"{e.worst_attack} ({e.threat})")  # fmt: skip
     return 0
