@@ -16,6 +16,7 @@ and records these as not applicable (`PayoffTable.not_applicable`, "n/a" in repo
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from typing import Any
 
@@ -47,14 +48,14 @@ class Rows:
         """The game of `job`'s column (made on first use)."""
         from advgame.core.registry import make
 
-        key = (job.scenario, repr(sorted(job.make_kwargs.items())))
+        key = _game_key(job)
         if key not in self._games:
             self._games[key] = make(job.scenario, **dict(job.make_kwargs))
         return self._games[key]
 
     def victims(self, job: EvalJob) -> dict[str, Any]:
         """`job`'s protagonist policies built for its game, as the evaluation builds them."""
-        key = (job.scenario, repr(sorted(job.make_kwargs.items())), job.protagonist)
+        key = (*_game_key(job), job.protagonist)
         if key not in self._victims:
             self._victims[key] = _protagonists(self.game(job), job.protagonist_spec)
         return self._victims[key]
@@ -72,6 +73,16 @@ class Rows:
         self.close()
 
 
+def _game_key(job: EvalJob) -> tuple[str, str]:
+    """Which game `job`'s column plays: its scenario and `make` arguments."""
+    return (job.scenario, repr(sorted(job.make_kwargs.items())))
+
+
+def _given_or_own(rows: Rows | None) -> AbstractContextManager[Rows]:
+    """`rows` left open for its owner, or a new `Rows` closed when the check ends."""
+    return Rows() if rows is None else nullcontext(rows)
+
+
 def not_applicable(jobs: Sequence[EvalJob], rows: Rows | None = None) -> dict[tuple[str, str], str]:
     """``{(protagonist, adversary): reason}`` for the jobs whose column cannot play their row.
 
@@ -80,17 +91,12 @@ def not_applicable(jobs: Sequence[EvalJob], rows: Rows | None = None) -> dict[tu
     built are reused); only jobs with an adversary spec that has ``unplayable`` are asked, so
     tables of noise and learned columns cost nothing here.
     """
-    own = rows is None
-    rows = Rows() if rows is None else rows
     out: dict[tuple[str, str], str] = {}
-    try:
+    with _given_or_own(rows) as built:
         for job in (j for j in jobs if _asks(j)):
-            reason = _reason(job, rows.game(job), rows.victims(job))
+            reason = _reason(job, built.game(job), built.victims(job))
             if reason is not None:
                 out[(job.protagonist, job.adversary)] = reason
-    finally:
-        if own:
-            rows.close()
     return out
 
 
@@ -152,25 +158,19 @@ def learn_ahead(
 
     if workers < 2 and executor == "local":
         return 0
-    own = rows is None
-    rows = Rows() if rows is None else rows
     units: dict[tuple[str, ...], _Learn] = {}
-    try:
+    with _given_or_own(rows) as built:
         for job in jobs:
             for agent, spec in job.adversary_specs.items():
                 if not (callable(getattr(spec, "learned", None)) and hasattr(spec, "learn")):
                     continue
-                unit_id = (job.scenario, repr(sorted(job.make_kwargs.items())),
-                           repr(job.protagonist_spec), agent, repr(spec))  # fmt: skip
+                unit_id = (*_game_key(job), repr(job.protagonist_spec), agent, repr(spec))
                 if unit_id in units:  # one unit per model
                     continue
-                if not spec.learned(rows.game(job), agent, rows.victims(job)):
+                if not spec.learned(built.game(job), agent, built.victims(job)):
                     units[unit_id] = _Learn(
                         job.scenario, dict(job.make_kwargs), job.protagonist_spec, agent, spec
                     )
-    finally:
-        if own:
-            rows.close()
     if units:
         run_units(_learn, list(units.values()), executor=executor, workers=workers, address=address)
     return len(units)
