@@ -39,9 +39,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from advgame.adversaries.paad_director import director_info, train_director
 from advgame.adversaries.whitebox import _Attack, cache_root, victim_fingerprint
 from advgame.adversaries.whitebox_walk import NumpyScorer, WhiteBoxAttackPolicy
-from advgame.core.policy import AgentInfo, WhiteBox, act_batch, as_policy, numpy_net_of
+from advgame.core.policy import WhiteBox, act_batch, as_policy, numpy_net_of
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -152,8 +153,7 @@ class PAADAttack(_Attack):
         (`advgame.adversaries.paad_director.train_director`); the result is written
         under the cache folder and returned as an `SB3Checkpoint`.
         """
-        from advgame.adversaries.paad_director import train_director
-        from advgame.training.checkpoint import SB3Checkpoint
+        from advgame.agents.checkpoint import SB3Checkpoint
 
         key, folder = self._cached(game, agent, target, victim)
         if key not in _DIRECTORS:
@@ -192,7 +192,7 @@ class PAADAttack(_Attack):
     def learned(self, game: Game, agent: str, victims: Mapping[str, Any]) -> bool:
         """Whether the director against `victims` is ready (in this process or the cache).
 
-        With `learn`, what `advgame.evaluation.applicable.learn_ahead` asks to train the
+        With `learn`, what `advgame.evaluation.table.applicable.learn_ahead` asks to train the
         directors of a table on the executor's workers, in parallel, before the table.
         """
         targets = list(getattr(game.disruptors.get(agent), "targets", ()))
@@ -201,14 +201,6 @@ class PAADAttack(_Attack):
             return True  # nothing to learn: `unplayable` will say why
         key, folder = self._cached(game, agent, targets[0], victim)
         return key in _DIRECTORS or (folder / f"{agent}.zip").is_file()
-
-
-def director_info(game: Game, agent: str, target: str) -> AgentInfo:
-    """What a director of `agent` plays: its observations, a direction in `target`'s actions."""
-    from gymnasium import spaces
-
-    shape = game.action_space(target).shape
-    return AgentInfo(agent, game.observation_space(agent), spaces.Box(-1.0, 1.0, shape, np.float32))
 
 
 def _unit(directions: np.ndarray) -> np.ndarray:

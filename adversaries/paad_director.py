@@ -8,16 +8,27 @@ director's environment, and `train_director` trains one with PPO against a froze
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
-from advgame.adversaries.paad import PAADAttack, _PAADPolicy, director_info
 from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
+from advgame.core.policy import AgentInfo
 from advgame.errors import ConfigError
 
-__all__ = ["DirectorEnv", "train_director"]
+if TYPE_CHECKING:
+    from advgame.core.game import Game
+
+__all__ = ["DirectorEnv", "director_info", "train_director"]
+
+
+def director_info(game: Game, agent: str, target: str) -> AgentInfo:
+    """What a director of `agent` plays: its observations, a direction in `target`'s actions."""
+    from gymnasium import spaces
+
+    shape = game.action_space(target).shape
+    return AgentInfo(agent, game.observation_space(agent), spaces.Box(-1.0, 1.0, shape, np.float32))
 
 
 class DirectorEnv(VecEnvWrapper):
@@ -31,17 +42,18 @@ class DirectorEnv(VecEnvWrapper):
 
     Args:
         venv: the adversary's `VectorView`.
-        spec: the attack (the actor's walk settings).
+        spec: the attack (`advgame.adversaries.paad.PAADAttack`: the actor's walk settings);
+            ``spec.build(info)`` gives each view's actor.
         seed: seeds view ``i``'s random starts with ``seed + i``.
 
     """
 
-    def __init__(self, venv: Any, spec: PAADAttack, seed: int = 0) -> None:
-        self.attackers: list[_PAADPolicy] = []
+    def __init__(self, venv: Any, spec: Any, seed: int = 0) -> None:
+        self.attackers: list[Any] = []
         space = None
         for i, view in enumerate(venv.envs):
             info = view.game.agent_info(view.agent)
-            pol = _PAADPolicy(spec, info)
+            pol = spec.build(info)
             targets = pol.disruptor.targets
             if len(targets) != 1:
                 raise ConfigError(
@@ -72,7 +84,7 @@ class DirectorEnv(VecEnvWrapper):
 
 
 def train_director(
-    spec: PAADAttack,
+    spec: Any,
     scenario: str,
     disruptor: Any,
     agent: str,
@@ -95,14 +107,19 @@ def train_director(
         phase: the game phase to train in (the attack's evaluation phase).
 
     """
+    from advgame.agents.sb3 import PPOConfig
+    from advgame.agents.side import Side
+    from advgame.agents.stats import normalized
     from advgame.core.vector import VectorView
     from advgame.core.views import view_factory
-    from advgame.training.config import learner_config
-    from advgame.training.learning import Side, normalized
 
     rollout = min(2048, spec.director_steps)  # PPO's rollout, shorter for a tiny budget
-    hparams = {"learning_rate": spec.learning_rate, "ent_coef": spec.ent_coef, "n_steps": rollout}
-    learner = learner_config("ppo", {**hparams, "batch_size": min(64, rollout)})
+    learner = PPOConfig(
+        learning_rate=float(spec.learning_rate),
+        ent_coef=float(spec.ent_coef),
+        n_steps=rollout,
+        batch_size=min(64, rollout),
+    )
     fn = view_factory(scenario, agent, {target: victim}, disruptors=[disruptor], phase=phase)
     views = VectorView([fn])
     std = getattr(victim, "observation_std", None)

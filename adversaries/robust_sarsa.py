@@ -19,7 +19,7 @@ Learning ``Q^π`` costs simulator steps and a few seconds of fitting, so it happ
 protagonist: attaching the attack to a victim learns it, or loads it from a cache folder where
 it is stored under a fingerprint of the policy (its mean actions on fixed probe observations),
 the scenario and the attack's settings. `advgame.evaluation.evaluate` asks every column about
-every row in the main process before any job runs (`advgame.evaluation.applicable`), which
+every row in the main process before any job runs (`advgame.evaluation.table.applicable`), which
 attaches the attack once per protagonist: the critic is learned there, once, and every worker
 and episode loads it.
 """
@@ -189,7 +189,7 @@ class RobustSarsaAttack(_Attack):
     def learned(self, game: Game, agent: str, victims: Mapping[str, Any]) -> bool:
         """Whether every target's ``Q^π`` is ready (in this process or the cache).
 
-        With `learn`, what `advgame.evaluation.applicable.learn_ahead` asks to fit the critics
+        With `learn`, what `advgame.evaluation.table.applicable.learn_ahead` asks to fit the critics
         of a table on the executor's workers, in parallel, before the table.
         """
         if len(game.protagonists) != 1 or not game.scenario_id:

@@ -3,14 +3,14 @@
 ``adversary_spec("gauss:0.1")`` is ``GaussianAdversary(std=0.1)``; a dict names the kind and
 its fields: ``{"kind": "uniform", "low": -0.2, "high": 0.2}``. The kinds:
 
-==============  ================================================  ======================
-text            spec                                              argument
-==============  ================================================  ======================
+==============  ====================================================  ======================
+text            spec                                                  argument
+==============  ====================================================  ======================
 ``zero``        `ZeroAdversary` (the disruptor's no-op)
 ``random``      `RandomAdversary` (uniform over the whole budget)
-``gauss:S``     `GaussianAdversary(std=S)`                        the std (default 0.1)
-``uniform:W``   `UniformAdversary(low=-W, high=W)`                the half-width
-``constant:V``  `ConstantAdversary(value=V)`                      the raw value
+``gauss:S``     `GaussianAdversary(std=S)`                            the std (default 0.1)
+``uniform:W``   `UniformAdversary(low=-W, high=W)`                    the half-width
+``constant:V``  `ConstantAdversary(value=V)`                          the raw value
 ``mad``         `MADAttack` (white-box)
 ``critic``      `CriticAttack` (white-box)
 ``rs``          `RobustSarsaAttack` (white-box, learned critic)
@@ -19,7 +19,7 @@ text            spec                                              argument
 ``pa-ad``       `PAADAttack` (white-box, learned director)
 ``llm``         `LLMAdversary` (the offline local model; a dict
                 may give ``backend``: ``{"kind": "openai", ...}``)
-==============  ================================================  ======================
+==============  ====================================================  ======================
 """
 
 from __future__ import annotations

@@ -153,14 +153,14 @@ class _Attack:
         """Learn (or load) what attaching this attack to `victims` learns, as attaching does.
 
         With ``learned(game, agent, victims) -> bool``, which attacks that learn per victim
-        define, what `advgame.evaluation.applicable.learn_ahead` runs on a table's workers.
+        define, what `advgame.evaluation.table.applicable.learn_ahead` runs on a table's workers.
         """
         self.build(game.agent_info(agent)).attach(game, victims)
 
     def unplayable(self, game: Game, agent: str, victims: Mapping[str, Any]) -> str | None:
         """Why this attack cannot play `agent` of `game` against `victims`, or None if it can.
 
-        What `advgame.evaluation.applicable` asks before a table runs: the attack is built and
+        What `advgame.evaluation.table.applicable` asks before a table runs: the attack is built and
         attached as in a real episode, and the `ConfigError` its attaching would raise is the
         reason. A column that cannot work for any row (not an observation adversary, no
         budget) raises here instead.

@@ -11,7 +11,7 @@ autograd. The spec says what the walk maximises; this module says how it walks.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -20,10 +20,9 @@ from advgame.disruptors.observation import ObservationRuntime
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:
-    from advgame.adversaries.whitebox import _Attack
     from advgame.core.game import Game
 
-__all__ = ["NumpyScorer", "Walk", "WhiteBoxAttackPolicy"]
+__all__ = ["AttackSpec", "NumpyScorer", "Walk", "WhiteBoxAttackPolicy"]
 
 _RADIUS = 1.0 - 1e-6
 """L2 attacks stay this far inside the unit ball: rounding to float32 must not leave it."""
@@ -35,10 +34,39 @@ Walk = Callable[[np.ndarray], tuple[np.ndarray, Callable[[], np.ndarray]]]
 """The adversary's actions ``[N, k]`` -> (objective per row, float64; its gradient in them)."""
 
 
-class WhiteBoxAttackPolicy:
-    """A built white-box attack: one `_Attack` spec against its disruptor's targets."""
+class AttackSpec(Protocol):
+    """What the walk needs of an attack spec (the specs of `advgame.adversaries.whitebox`)."""
 
-    def __init__(self, spec: _Attack, info: AgentInfo) -> None:
+    steps: int
+    """Gradient steps per walk."""
+    step_size: float | None
+    """The step in the unit box (None: 2.5 / steps)."""
+    restarts: int
+    """Extra random starts; the best walk wins."""
+    rowwise: bool
+    """Whether the objective is one value per game row (games of a batch walk together)."""
+
+    def check_victim(self, agent: str, victim: WhiteBox, probe: Any) -> None:
+        """Refuse a victim the attack cannot use, with a clear message."""
+        ...
+
+    def objective(self, victim: WhiteBox, clean: Any, attacked: Any) -> Any:
+        """What the walk maximises, from the clean and attacked observations (torch)."""
+        ...
+
+    def row_scorer(self, victim: WhiteBox, clean: Any) -> Callable[[Any], Any]:
+        """The objective per row of a batch (torch)."""
+        ...
+
+    def numpy_scorer(self, victim: WhiteBox, clean: np.ndarray) -> NumpyScorer | None:
+        """The objective and its gradient through NumPy (None: walk in torch)."""
+        ...
+
+
+class WhiteBoxAttackPolicy:
+    """A built white-box attack: one `AttackSpec` against its disruptor's targets."""
+
+    def __init__(self, spec: AttackSpec, info: AgentInfo) -> None:
         d = info.disruptor
         if not isinstance(d, ObservationRuntime):
             kind = None if d is None else type(d.spec).__name__
@@ -67,7 +95,7 @@ class WhiteBoxAttackPolicy:
                 raise ConfigError(
                     f"{type(self.spec).__name__} on {self.agent!r} needs white-box access to "
                     f"{target!r}'s policy, but it is {type(victim).__name__}. White-box policies: "
-                    "SB3 checkpoints (advgame.training.checkpoint.SB3Checkpoint/SB3Policy) and MAPPO/IPPO "
+                    "SB3 checkpoints (advgame.agents.checkpoint.SB3Checkpoint/SB3Policy) and MAPPO/IPPO "
                     "actors; a learner being trained inside a view cannot be attacked this way."
                 )
             space = self.disruptor.spaces.get(target)  # Box targets only; Dicts have plans
@@ -254,7 +282,7 @@ class WhiteBoxAttackPolicy:
     def _numpy_scorer(
         self, policies: Sequence[WhiteBoxAttackPolicy], victim: Any, clean: np.ndarray
     ) -> NumpyScorer | None:
-        """The spec's `_Attack.numpy_scorer` for the rows of `policies` (None: walk in torch).
+        """The spec's `AttackSpec.numpy_scorer` for the rows of `policies` (None: walk in torch).
 
         A hook for attacks whose objective also depends on each game's own state (PA-AD's
         direction per row).

@@ -31,7 +31,7 @@ class FileFormatError(AdvgameError, ValueError):
 
     The message names the file, says whether it looks empty, truncated, not of its format or
     written by another version, and how to recover (rerun the step that wrote it, or delete
-    the folder). Bad *values* a user typed are `ConfigError`s.
+    the folder). Bad *values* a user typed raise `ConfigError` instead.
     """
 
     def __init__(self, message: str, path: str | None = None) -> None:

@@ -1,4 +1,4 @@
-"""MAPPO and IPPO for the protagonist team of a game, compact torch learners on `TeamView`s.
+"""MAPPO and IPPO for the protagonist team of a game, compact torch learners on team views.
 
 Only MAPPO/IPPO over MaMuJoCo have no maintained library behind them here, so they are written
 out (design invariant 6). Both train one Gaussian actor per protagonist on its own (perturbed)
@@ -7,7 +7,7 @@ observation; they differ in the critic:
 * **MAPPO** (Yu et al., 2022): a centralised critic on the true global state `TeamView.state`.
 * **IPPO** (de Witt et al., 2020): one critic per protagonist on its local observation.
 
-`TeamLearner` follows the protocol of `advgame.training.learning.Side` (``agents``, ``steps``, ``learn``,
+`TeamLearner` follows the protocol of `advgame.agents.side.Side` (``agents``, ``steps``, ``learn``,
 ``freeze``, ``set_policies``, ``set_observation_scale``, ``observation_std``, ``save``,
 ``load``, ``close``), so the alternation loop drives it like any other side. Its views are
 stepped in sync in this process. Every random draw of a run comes from the two generators made
@@ -46,8 +46,8 @@ from advgame.agents.marl_nets import (
     actor_record,
 )
 from advgame.agents.marl_ppo import ppo_update
+from advgame.agents.stats import EpisodeStats
 from advgame.errors import ConfigError
-from advgame.training.learning import EpisodeStats
 
 __all__ = ["MARL_LEARNERS", "IPPOConfig", "MAPPOConfig", "TeamLearner", "TeamPPOConfig"]
 

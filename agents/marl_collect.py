@@ -19,10 +19,11 @@ import numpy as np
 import torch
 from gymnasium import spaces
 
-from advgame.agents.marl_nets import RewardScaler, RunningNorm, TeamModel, TeamSnapshot
+from advgame.agents.marl_nets import TeamModel, TeamSnapshot
+from advgame.agents.marl_norm import RewardScaler, RunningNorm
 from advgame.agents.marl_ppo import Rollout, TrainData
+from advgame.agents.stats import EpisodeStats
 from advgame.errors import ConfigError
-from advgame.training.learning import EpisodeStats
 
 __all__ = ["TeamCollector"]
 
@@ -31,7 +32,7 @@ class TeamCollector:
     """Steps team views in sync; normalizes observations, states and rewards while training.
 
     Args:
-        envs: `advgame.core.team.TeamView`s of one game (the same protagonists).
+        envs: team views (`advgame.core.team.TeamView`) of one game (the same protagonists).
         config: the learner config (``n_steps``, ``gamma``, normalization switches, ``clip_obs``).
         rng: draws the seed of every episode of every view (the learner's generator).
 

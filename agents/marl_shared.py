@@ -12,7 +12,7 @@ SuperSuit's agents-as-envs vectorisation forces one policy on *every* agent of t
 why it only ever sees the protagonist team: the adversaries stay frozen policies inside the view.
 Heterogeneous teams (different shapes or roles) train with `advgame.agents.marl.TeamLearner`.
 
-`SharedIPPO` follows the `advgame.training.learning.Side` protocol like `TeamLearner`; its `steps` count
+`SharedIPPO` follows the `advgame.agents.side.Side` protocol like `TeamLearner`; its `steps` count
 team steps (SB3 counts one step per protagonist slot).
 """
 
@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
+from advgame.agents.checkpoint import SB3Checkpoint
+from advgame.agents.stats import EpisodeStats, normalized
 from advgame.errors import ConfigError
-from advgame.training.checkpoint import SB3Checkpoint
-from advgame.training.learning import EpisodeStats, normalized
 
 __all__ = ["SharedIPPO", "shared_venv"]
 

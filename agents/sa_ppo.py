@@ -1,7 +1,7 @@
 """SA-PPO: PPO with the state-adversarial regulariser of Zhang et al. 2020 (NeurIPS).
 
 The policy is asked to act alike on every observation in a small ball around each state it
-was trained on: each minibatch update adds
+was trained on: each minibatch update adds::
 
     κ · mean_s max_{ŝ ∈ B_ε(s)} KL(π(·|s) ‖ π(·|ŝ))
 
@@ -122,7 +122,8 @@ class SAPPO(PPO):
         sa_ramp: fraction of `sa_total_steps` over which ε grows from 0 (SA-PPO: 0.75).
         sa_space: ``"normalized"`` or ``"raw"`` (see the module doc).
         sa_total_steps: the run's planned steps (for the ramp).
-        *args, **kwargs: SB3 `PPO`'s.
+        *args: SB3 `PPO`'s positional arguments.
+        **kwargs: SB3 `PPO`'s keyword arguments.
 
     """
 

@@ -50,8 +50,8 @@ import torch
 
 from advgame.agents.marl import TeamLearner, TeamPPOConfig
 from advgame.agents.safe_ppo import Direction, SafeCollector, SafeModel, safe_update
+from advgame.agents.stats import EpisodeStats
 from advgame.errors import ConfigError
-from advgame.training.learning import EpisodeStats
 
 __all__ = [
     "SAFE_LEARNERS",

@@ -26,7 +26,7 @@ from torch import nn
 from advgame.agents.marl_collect import TeamCollector
 from advgame.agents.marl_nets import NumpyMLP, TeamModel, _mlp
 from advgame.agents.marl_ppo import Rollout, TrainData, gae, kl_exceeded
-from advgame.training.learning import EpisodeStats
+from advgame.agents.stats import EpisodeStats
 
 __all__ = ["Direction", "SafeCollector", "SafeModel", "SafeTrainData", "project", "safe_update"]
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.evaluation.payoff import ci95
+from advgame.evaluation.table.payoff import ci95
 
 
 def fmt(values: list[float]) -> str:
@@ -118,7 +118,7 @@ def make_checkpoints(folder: Path, env: str) -> dict[str, Any]:
     import gymnasium as gym
     from stable_baselines3 import PPO
 
-    from advgame.training.checkpoint import SB3Checkpoint
+    from advgame.agents.checkpoint import SB3Checkpoint
 
     out = {}
     for seed in (1, 2):

@@ -33,8 +33,8 @@ COLUMNS = ("nominal", "random", "MAD", "critic", "learned")
 
 
 def _train(seed: int, args: argparse.Namespace) -> dict[str, Path]:
-    from advgame.evaluation.suite import _train_or_resume
     from advgame.training import METHODS, TrainConfig
+    from advgame.workflows.suite import _train_or_resume
 
     common = {
         "scenario": args.scenario,
@@ -76,8 +76,8 @@ def _seed_job(seed: int, args: argparse.Namespace) -> dict[str, float]:
     import torch
 
     from advgame.adversaries import CriticAttack, MADAttack, RandomAdversary
-    from advgame.evaluation.exploit import best_responses
-    from advgame.evaluation.suite import run_protagonist
+    from advgame.evaluation.attacks.exploit import best_responses
+    from advgame.workflows.suite import run_protagonist
 
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)

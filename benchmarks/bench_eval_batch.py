@@ -6,7 +6,7 @@ worker (``evaluate(jobs, workers=1)`` runs `run_job` per job in this process):
 * ``today``: the path before this change: `play_job_sequential` per job (one game, `rollout`
   seed by seed, one policy call per agent per move) with SB3's own ``policy._predict`` per
   call (`ActorForward` switched off), as `SB3Policy` acted before.
-* ``sequential``: `advgame.evaluation.batched.play_job_sequential` per job, with the leaner
+* ``sequential``: `advgame.evaluation.table.batched.play_job_sequential` per job, with the leaner
   `ActorForward` per call (same actions, bit for bit).
 * ``per-job``: `run_job` per job (all episodes of one job in lockstep, one policy call per
   agent per move for them: the first pass of batching).
@@ -40,10 +40,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from advgame.agents.checkpoint import SB3Checkpoint
 from advgame.core.views import view_factory
 from advgame.evaluation import AdversarySetup, evaluate, population_jobs, run_job
-from advgame.evaluation.batched import play_job_sequential
-from advgame.training.checkpoint import SB3Checkpoint
+from advgame.evaluation.table.batched import play_job_sequential
 
 ENV = "Hopper-v5"
 GOAL = 4.0
@@ -66,7 +66,7 @@ def _ppo(env_fn: Any, steps: int, seed: int, path: Path) -> SB3Checkpoint:
 
 def _today(job: Any) -> list[dict[str, Any]]:
     """`play_job_sequential` with SB3's own predict per call (the policy path before batching)."""
-    from advgame.training import forward
+    from advgame.agents import forward
 
     of = forward.ActorForward.of
     forward.ActorForward.of = staticmethod(lambda policy: None)  # type: ignore[method-assign]

@@ -32,7 +32,7 @@ import numpy as np
 from _common import make_checkpoints
 
 from advgame.evaluation import AdversarySetup, evaluate, population_jobs
-from advgame.evaluation.executor import UnitRecord, run_units
+from advgame.runner.run import UnitRecord, run_units
 
 ENV = "HalfCheetah-v5"
 VARIANTS = (("local", 1), ("ray", 1), ("local", 2), ("ray", 2))

@@ -198,7 +198,8 @@ def attack(out: Path, seeds: int, episodes: int, every: int) -> dict:
     for name in attacks:
         values = [v["return"] for k, v in results.items() if k.rsplit("-s", 1)[0] == name]
         lines.append(f"| {name} | {fmt(values)} |")
-    (out / f"attack-every-{every}.md").write_text("\n".join(lines) + "\n")
+    title = f"# The U-trained PPO policies under each attack, every {every} steps (Hopper-v5)"
+    (out / f"attack-every-{every}.md").write_text("\n".join([title, "", *lines]) + "\n")
     print("\n".join(lines))
     return results
 
@@ -215,7 +216,8 @@ def _table(results: dict, out: Path) -> None:
         cells = [fmt([r[f"eval_{a}"] for r in rows]) for a in ("nominal", "uniform", "llm")]
         speed = float(np.mean([r["train_steps_per_s"] for r in rows]))
         lines.append(f"| {kind} ({len(rows)} seeds) | {speed:.0f} | " + " | ".join(cells) + " |")
-    (out / "experiment.md").write_text("\n".join(lines) + "\n")
+    title = "# PPO trained under the LLM adversary vs under U(0.2, 0.8) noise (Hopper-v5)"
+    (out / "experiment.md").write_text("\n".join([title, "", *lines]) + "\n")
     print("\n".join(lines))
 
 

@@ -59,9 +59,9 @@ def _job(seed: int, condition: str, args: argparse.Namespace) -> dict[str, Any]:
 
     from advgame.adversaries import GaussianAdversary
     from advgame.core.registry import scenario_spec
-    from advgame.evaluation.demo import train_or_resume
-    from advgame.evaluation.suite import run_protagonist
     from advgame.training import TrainConfig
+    from advgame.workflows.demo import train_or_resume
+    from advgame.workflows.suite import run_protagonist
 
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.evaluation.payoff import ci95
+from advgame.evaluation.table.payoff import ci95
 
 SCENARIO = "RS-MultiRobustDoor"
 
@@ -40,8 +40,8 @@ def fmt(values: list[float]) -> str:
 
 
 def _train(seed: int, args: argparse.Namespace) -> dict[str, str]:
-    from advgame.evaluation.suite import _train_or_resume
     from advgame.training import TrainConfig
+    from advgame.workflows.suite import _train_or_resume
 
     common = {
         "scenario": SCENARIO,
@@ -64,7 +64,7 @@ def _train(seed: int, args: argparse.Namespace) -> dict[str, str]:
 
 
 def _learned_arm(run_dir: Path) -> Any:
-    from advgame.training.checkpoint import SB3Checkpoint
+    from advgame.agents.checkpoint import SB3Checkpoint
 
     folder = run_dir / json.loads((run_dir / "state.json").read_text())["checkpoint"]
     norm = folder / "arm_adversary_obs_norm.npz"
@@ -76,7 +76,7 @@ def _learned_arm(run_dir: Path) -> Any:
 def _evaluate(seed: int, dirs: dict[str, str], episodes: int) -> dict[str, float]:
     import advgame
     from advgame.core.episodes import rollout
-    from advgame.evaluation.suite import run_protagonist
+    from advgame.workflows.suite import run_protagonist
 
     arm = _learned_arm(Path(dirs["alternation"]))
     row: dict[str, float] = dict(arm_motion(Path(dirs["alternation"]).parents[1], seed))
@@ -103,7 +103,7 @@ def arm_motion(out: Path, seed: int) -> dict[str, float]:
     """
     import advgame
     from advgame.core.episodes import build_policies
-    from advgame.evaluation.suite import run_protagonist
+    from advgame.workflows.suite import run_protagonist
 
     run = out / "runs" / f"alternation-s{seed}"
     game = advgame.make(SCENARIO, preset="default", phase="eval")

@@ -38,8 +38,8 @@ SIGMAS = (0.0, 0.1, 0.15)
 def _train_seed(seed: int, steps: int, out: str, scenario: str, attack: str) -> dict[str, str]:
     import torch
 
-    from advgame.evaluation.suite import _train_or_resume
     from advgame.training import METHODS, TrainConfig
+    from advgame.workflows.suite import _train_or_resume
 
     torch.set_num_threads(1)
     iters = max(steps // 2048, 1)
@@ -88,8 +88,8 @@ def _evaluate_seed(
     import torch
 
     from advgame.adversaries import GaussianAdversary, RandomAdversary
-    from advgame.evaluation.exploit import best_responses
-    from advgame.evaluation.suite import run_protagonist
+    from advgame.evaluation.attacks.exploit import best_responses
+    from advgame.workflows.suite import run_protagonist
 
     torch.set_num_threads(1)
     prot = {name: run_protagonist(Path(d))[1] for name, d in dirs.items()}

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.evaluation.payoff import ci95
+from advgame.evaluation.table.payoff import ci95
 
 CONDITIONS = (
     "nominal",
@@ -53,8 +53,8 @@ def _job(algo: str, condition: str, seed: int, args: argparse.Namespace) -> dict
 
     import advgame
     from advgame.core.episodes import rollout
-    from advgame.evaluation.suite import _train_or_resume, run_protagonist
     from advgame.training import TrainConfig
+    from advgame.workflows.suite import _train_or_resume, run_protagonist
 
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)

@@ -72,7 +72,7 @@ def test_saved_team_actors_act_and_are_attacked_in_batches(
     """A constrained learner's saved actor (MAPPO/IPPO format): lockstep rows = lone rows."""
     import numpy as np
 
-    from advgame import zoo
+    from advgame.workflows import zoo
 
     actors = zoo.load("safetyhopper/pcrpo")
     policy = actors["protagonist"].build(_info("SafetyHopper-v5"))

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from stable_baselines3 import PPO
 
+from advgame.agents.checkpoint import SB3Checkpoint, SB3Policy
 from advgame.core.views import view_factory
 from advgame.errors import ConfigError
 from advgame.evaluation import (
@@ -24,8 +25,7 @@ from advgame.evaluation import (
     lockstep_groups,
     population_jobs,
 )
-from advgame.evaluation.batched import play_job_sequential, play_jobs
-from advgame.training.checkpoint import SB3Checkpoint, SB3Policy
+from advgame.evaluation.table.batched import play_job_sequential, play_jobs
 
 ENV = "Hopper-v5"
 

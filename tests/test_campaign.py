@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 import advgame
-from advgame.campaign import load_campaign, run_dir
 from advgame.cli import main
 from advgame.errors import ConfigError, FileFormatError
+from advgame.workflows.campaign import load_campaign, run_dir
 
 TINY = """
 scenario = "Hopper-v5"
@@ -111,6 +111,29 @@ def test_bad_campaign_files_are_clear_errors(tmp_path: Path) -> None:
             load_campaign(bad)
 
 
+def test_a_bad_evaluate_section_is_refused_before_anything_trains(tmp_path: Path) -> None:
+    """Issue 36: the [evaluate] section is read as the evaluation reads it, when the file is."""
+    head = 'scenario = "InvertedPendulum-v5"\nmethods = ["ppo"]\n[evaluate]\n'
+    bad = tmp_path / "bad.toml"
+    for text, words in [
+        ('threat = "atla"', "has no preset 'atla'"),  # the user's typo of the issue
+        ('adversaries = ["attack:madd"]', "Unknown attack 'madd'"),
+        ('adversaries = ["atack:mad"]', "Unknown adversary column kind 'atack'"),
+        ('adversaries = ["preset:nope"]', "nope"),
+        ('adversaries = ["population:runs/x,lats=3"]', "Bad option"),
+        ('adversaries = "attacks"', "must be a list of column specs"),
+        ("threat = 3", "must be a preset name"),
+        # a search or attack needs an observation budget in the threat model
+        ('threat = "reward-gauss-0.1"\nexploitability = 100', "no bounded observation"),
+    ]:
+        bad.write_text(head + text)
+        with pytest.raises(ConfigError, match=words):
+            load_campaign(bad)
+    good = head + 'adversaries = ["attacks", "population:runs/later,last=2"]\nthreat = "default"'
+    bad.write_text(good)
+    assert load_campaign(bad).threat == "default"  # runs named by columns may come later
+
+
 def test_a_variant_trains_as_its_method_with_its_own_fields(tmp_path: Path) -> None:
     path = tmp_path / "variants.toml"
     path.write_text(
@@ -149,7 +172,7 @@ def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
     grid: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Releasing the finished tiny campaign (the test above trained it; here it only tables)."""
-    from advgame import zoo
+    from advgame.workflows import zoo
 
     root = tmp_path / "zoo"
     args = ["campaign", str(grid), "--workers", "2", "--no-progress", "--release", str(root)]
@@ -169,8 +192,8 @@ def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
                  "--seeds", "1", "--workers", "1", "--adversaries", "nominal", "--budgets"]) == 0  # fmt: skip
     assert "hopper/atla" in (out / "report.md").read_text()
     # each agent against its own released adversary: the demo's zoo table
-    from advgame.evaluation.demo import demo_zoo, zoo_summary
-    from advgame.evaluation.payoff import PayoffTable
+    from advgame.evaluation.table.payoff import PayoffTable
+    from advgame.workflows.demo import demo_zoo, zoo_summary
 
     report = demo_zoo(tmp_path / "demo-zoo", quick=True, workers=1, root=root)
     assert report is not None
@@ -190,8 +213,8 @@ def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
 def test_every_released_agent_matches_its_manifest_and_plays() -> None:
     """The repository's zoo: checksums, and one short episode of each agent."""
     import advgame
-    from advgame import zoo
     from advgame.core.episodes import rollout
+    from advgame.workflows import zoo
 
     found = zoo.entries()
     if not found:
@@ -241,8 +264,8 @@ def test_a_safe_campaign_tables_return_cost_and_satisfaction_per_method(tmp_path
         assert line.endswith(f"| {share:.0f} % |")
         assert f"| {sum(costs) / len(costs):.4g} |" in line
     # A constrained learner's agent is released as its actors file and plays from the zoo.
-    from advgame import zoo
     from advgame.core.episodes import rollout
+    from advgame.workflows import zoo
 
     root = tmp_path / "zoo"
     args = ["campaign", str(spec), "--workers", "1", "--no-progress", "--release", str(root)]

@@ -213,7 +213,7 @@ def test_quick_demo_trains_evaluates_and_prints_the_report_path(tmp_path: Path, 
     assert main(["demo", "--quick", "--out", str(out), "--workers", "1"]) == 0
     printed = capsys.readouterr().out
     assert f"report: {out / 'report.md'}" in printed
-    from advgame import zoo
+    from advgame.workflows import zoo
 
     released = [e.id for e in zoo.entries() if e.scenario == "Hopper-v5" and "adversary" in e.files]
     if released:  # the repository's zoo: each released agent's row, under its own adversary
@@ -223,7 +223,7 @@ def test_quick_demo_trains_evaluates_and_prints_the_report_path(tmp_path: Path, 
     safe = [e.id for e in zoo.entries() if e.scenario == "SafetyHopper-v5"]
     if safe:  # the released safe agents, nominally and under action noise, with their cost
         assert f"safe report: {out / 'safe' / 'report.md'}" in printed
-        from advgame.evaluation.payoff import PayoffTable
+        from advgame.evaluation.table.payoff import PayoffTable
 
         table = PayoffTable.from_csv(out / "safe" / "payoff.csv")
         assert sorted(table.protagonists) == sorted(safe)

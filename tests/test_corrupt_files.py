@@ -17,16 +17,16 @@ from typing import Any
 
 import pytest
 
+from advgame.agents.checkpoint import load_model, load_normalizer
 from advgame.cli import main
 from advgame.core.config import load_json
 from advgame.errors import FileFormatError
-from advgame.evaluation.executor import run_units
-from advgame.evaluation.payoff import PayoffTable
-from advgame.psro import load_meta
+from advgame.evaluation.table.payoff import PayoffTable
+from advgame.runner.run import run_units
 from advgame.training import TrainConfig
-from advgame.training.checkpoint import load_model, load_normalizer
 from advgame.training.loop import append_progress, read_state
 from advgame.training.population import Population
+from advgame.workflows.psro import load_meta
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +62,7 @@ def vecnormalize(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _meta(folder: Path) -> Path:
-    """A PSRO meta.json as `advgame.psro` writes it (one solved iteration)."""
+    """A PSRO meta.json as `advgame.workflows.psro` writes it (one solved iteration)."""
     entry = {"iteration": 0, "solver": "nash", "value": 1.5, "protagonists": ["p@0"],
              "adversaries": ["a@0"], "matrix": [[1.5]], "protagonist_strategy": [1.0],
              "adversary_strategy": [1.0]}  # fmt: skip

@@ -1,4 +1,4 @@
-"""`advgame.evaluation` and `advgame.evaluation.report`: metric math, jobs, real payoff tables, reports."""
+"""`advgame.evaluation` and `advgame.reports.report`: metric math, jobs, real payoff tables, reports."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from advgame.evaluation import (
     shift_grid,
     worst_case,
 )
-from advgame.evaluation.report import (
+from advgame.reports.report import (
     plot_budget_curve,
     plot_heatmap,
     plot_training_curves,

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import json
+import os
 import re
 import subprocess
 import sys
@@ -24,7 +25,19 @@ ROOT = Path(advgame.__file__).resolve().parents[1]
 LOCK = ROOT / "constraints.txt"
 CORE = {"gymnasium", "pettingzoo", "mujoco", "torch", "stable-baselines3", "numpy"}
 CORE |= {"matplotlib", "tqdm", "tensorboard"}
-EXTRAS = {"box2d", "mamujoco", "robotics", "robosuite", "llm", "ray", "test", "all", "bench"}
+EXTRAS = {
+    "box2d",
+    "mamujoco",
+    "robotics",
+    "robosuite",
+    "llm",
+    "ray",
+    "test",
+    "all",
+    "bench",
+    "docs",
+    "zoo",
+}
 
 
 def _lock() -> dict[str, Version]:
@@ -67,8 +80,8 @@ def test_lock_pins_every_requirement_inside_its_range() -> None:
         assert req.specifier.contains(pins[_norm(req.name)], prereleases=True), (req, pins)
 
 
-def test_readme_installation_names_every_extra_and_the_python_versions() -> None:
-    text = (ROOT / "README.md").read_text()
+def test_the_installation_page_names_every_extra_and_the_python_versions() -> None:
+    text = (ROOT / "docs" / "getting-started.md").read_text()
     section = text[text.index("## Installation") :]
     section = section[: section.index("\n## ", 1)]
     for extra in EXTRAS:
@@ -142,16 +155,64 @@ print(json.dumps({"steps": steps, "trained": (run / "state.json").is_file(), "ro
 """
 
 
+def _build(hook: str, project: Path, out: Path) -> Path:
+    """Run setuptools' PEP 517 `hook` (build_sdist or build_wheel) on `project` into `out`."""
+    code = f"import sys; from setuptools import build_meta as b; print(b.{hook}(sys.argv[1]))"
+    done = subprocess.run([sys.executable, "-c", code, str(out)], cwd=project, check=True,
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    return out / done.stdout.strip().splitlines()[-1]
+
+
+def _sdist_then_wheel(project: Path, out: Path) -> tuple[Path, Path]:
+    """The sdist of `project`, and the wheel built from that sdist (as pip builds it)."""
+    import tarfile
+
+    sdist = _build("build_sdist", project, out)
+    with tarfile.open(sdist) as tar:
+        tar.extractall(out / "src", filter="data")
+    (unpacked,) = (out / "src").iterdir()
+    return sdist, _build("build_wheel", unpacked, out)
+
+
 def test_core_wheel_alone_runs_in_a_fresh_venv(tmp_path: Path) -> None:
-    """The wheel of advgame without extras, installed with the lock's versions, runs the core."""
-    wheels = tmp_path / "wheels"
-    build = [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)]
-    subprocess.run(build, check=True, capture_output=True, timeout=300)
-    (wheel,) = wheels.glob("advgame-*.whl")
+    """As a user installs it: advgame's wheel built from its sdist (which must hold everything
+    the checkout's wheel has), and the zoo's wheel, in a fresh venv outside the checkout with
+    the lock's versions and no extras, run the core, list the 19 released agents and evaluate
+    one; families without their extra say what to install.
+    """
+    sys.path.insert(0, str(ROOT / "zoo" / "package"))
+    try:
+        import build as zoo_package  # zoo/package/build.py
+    finally:
+        sys.path.pop(0)
+    import zipfile
+
+    dist, direct = tmp_path / "dist", tmp_path / "direct"
+    dist.mkdir()
+    direct.mkdir()
+    _, wheel = _sdist_then_wheel(ROOT, dist)
+    # the sdist holds everything the wheel is built from: both wheels have the same files
+    names = [
+        sorted(zipfile.ZipFile(w).namelist()) for w in (wheel, _build("build_wheel", ROOT, direct))
+    ]
+    assert names[0] == names[1]
+    assert "advgame/evaluation/table/jobs.py" in names[0]  # every subpackage made it in
+    assert any(n.startswith("advgame/adversaries/prompts/") for n in names[0])
+    zoo_wheel = next(p for p in zoo_package.build(dist) if p.suffix == ".whl")
     env_dir = tmp_path / "venv"
     venv.create(env_dir, with_pip=True)
     python = env_dir / "bin" / "python"
-    install = [str(python), "-m", "pip", "install", "-q", "-c", str(LOCK), str(wheel)]
+    install = [
+        str(python),
+        "-m",
+        "pip",
+        "install",
+        "-q",
+        "-c",
+        str(LOCK),
+        str(wheel),
+        str(zoo_wheel),
+    ]
     proc = subprocess.run(install, capture_output=True, text=True, timeout=900, check=False)
     assert proc.returncode == 0, proc.stderr[-3000:]
     work = tmp_path / "work"
@@ -166,11 +227,29 @@ def test_core_wheel_alone_runs_in_a_fresh_venv(tmp_path: Path) -> None:
     assert 'pip install "advgame[box2d]"' in out["errors"]["LunarLander-v3"]
     assert 'pip install "advgame[mamujoco]"' in out["errors"]["MA-HalfCheetah-2x3"]
     assert 'pip install "advgame[robosuite]"' in out["errors"]["RS-Lift"]
-    listing = subprocess.run(
-        [str(env_dir / "bin" / "advgame"), "list", "LunarLander-v3", "Hopper-v5"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    ).stdout.splitlines()
+    cli = str(env_dir / "bin" / "advgame")
+    env = {k: v for k, v in os.environ.items() if k != "ADVGAME_ZOO"}
+
+    def run(*argv: str) -> str:
+        done = subprocess.run([cli, *argv], cwd=work, env=env, capture_output=True, text=True,
+                              timeout=600, check=False)  # fmt: skip
+        assert done.returncode == 0, done.stderr[-3000:]
+        return done.stdout
+
+    listing = run("list", "LunarLander-v3", "Hopper-v5").splitlines()
     assert "advgame[box2d]" in listing[0] and "needs" not in listing[1]
+    zoo = run("zoo", "list").splitlines()
+    assert len(zoo) == 1 + 19 and zoo[1].startswith("hopper/"), zoo  # from the installed package
+    report = run("evaluate", "--zoo", "hopper/ppo", "--seeds", "1", "--adversaries", "nominal",
+                 "--budgets", "--out", "eval")  # fmt: skip
+    assert "report:" in report and (work / "eval" / "payoff.csv").is_file()
+    # the families whose extra the core install has: Gymnasium's MuJoCo tasks and safe tasks
+    imports = "import advgame.scenarios.mujoco, advgame.scenarios.safety; print('ok')"
+    assert run_python(python, imports, work) == "ok"
+
+
+def run_python(python: Path, code: str, cwd: Path) -> str:
+    """`code` run by the venv's `python` in `cwd`; its last line of output."""
+    done = subprocess.run([str(python), "-c", code], cwd=cwd, capture_output=True, text=True,
+                          timeout=300, check=True)  # fmt: skip
+    return done.stdout.strip().splitlines()[-1]

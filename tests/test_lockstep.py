@@ -18,13 +18,13 @@ import pytest
 
 import advgame
 from advgame.core import lockstep
+from advgame.core.disruptor import Disruptor
 from advgame.core.schedule import Schedule
 from advgame.disruptors import (
     ActionDisruptor,
     ObservationDisruptor,
     RewardDisruptor,
 )
-from advgame.disruptors.base import Disruptor
 from advgame.disruptors.observation import ObservationRuntime
 from advgame.errors import ActionError
 

@@ -19,6 +19,7 @@ from stable_baselines3 import PPO
 
 import advgame
 from advgame.adversaries import GaussianAdversary
+from advgame.agents.checkpoint import SB3Checkpoint, SB3Policy
 from advgame.agents.marl import (
     MARL_LEARNERS,
     IPPOConfig,
@@ -29,6 +30,8 @@ from advgame.agents.marl import (
 from advgame.agents.marl_nets import TorchActorCheckpoint, TorchActorPolicy
 from advgame.agents.marl_shared import SharedIPPO
 from advgame.agents.sb3 import PPOConfig
+from advgame.agents.side import Side
+from advgame.agents.stats import EpisodeStats
 from advgame.core.config import field_docs
 from advgame.core.episodes import build_policies, filler_action, rollout
 from advgame.core.policy import ConstantPolicy
@@ -36,8 +39,6 @@ from advgame.core.team import TeamView, team_factory
 from advgame.core.views import view_factory
 from advgame.disruptors import ObservationDisruptor
 from advgame.errors import ActionError, ConfigError
-from advgame.training.checkpoint import SB3Checkpoint, SB3Policy
-from advgame.training.learning import EpisodeStats, Side
 
 ss = pytest.importorskip("supersuit", reason="the mamujoco extra: pip install '.[mamujoco]'")
 

@@ -9,13 +9,13 @@ import pytest
 import torch
 
 import advgame
-from advgame import zoo
 from advgame.adversaries import MaxCostAttack, RobustSarsaAttack
 from advgame.adversaries.specs import adversary_spec
 from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
 from advgame.core.episodes import rollout
 from advgame.errors import ConfigError
 from advgame.evaluation import adversary_columns
+from advgame.workflows import zoo
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 SMALL = {"samples": 2000, "epochs": 4}

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from advgame.errors import ConfigError, UnknownNameError
-from advgame.evaluation.metasolver import SOLVERS, fictitious_play, game_value, nash, solve, uniform
+from advgame.workflows.metasolver import SOLVERS, fictitious_play, game_value, nash, solve, uniform
 
 RPS = np.array([[0.0, -1.0, 1.0], [1.0, 0.0, -1.0], [-1.0, 1.0, 0.0]])
 

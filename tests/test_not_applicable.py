@@ -64,7 +64,7 @@ class _Learns:
 
 
 def test_both_checks_build_each_row_once(model: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from advgame.evaluation import applicable
+    from advgame.evaluation.table import applicable
 
     built: list[object] = []
     real = applicable._protagonists

@@ -15,10 +15,10 @@ import advgame
 from advgame.adversaries import MaxCostAttack, RobustSarsaAttack
 from advgame.adversaries.whitebox import CriticAttack, MADAttack
 from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
+from advgame.agents.checkpoint import SB3Policy
 from advgame.core.episodes import build_policies
 from advgame.core.numpy_net import NumpyNet
 from advgame.disruptors import ObservationDisruptor
-from advgame.training.checkpoint import SB3Policy
 
 ADV = "observation_adversary"
 
@@ -98,8 +98,8 @@ def test_what_a_numpy_net_does_not_cover_stays_in_torch() -> None:
 
 
 def test_saved_team_actors_have_a_numpy_mean() -> None:
-    from advgame import zoo
     from advgame.core.policy import AgentInfo
+    from advgame.workflows import zoo
 
     game = advgame.make("SafetyHopper-v5")
     spec = zoo.load("safetyhopper/pcrpo")["protagonist"]

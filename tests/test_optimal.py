@@ -10,7 +10,7 @@ import pytest
 
 from advgame.cli import main
 from advgame.errors import ConfigError
-from advgame.evaluation.optimal import OPTIMAL_GRID, OptimalSearch
+from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch
 
 
 def test_a_checkpoint_gets_its_strongest_searched_adversary(

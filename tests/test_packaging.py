@@ -145,35 +145,3 @@ def test_advgame_rollout_is_the_function_whatever_was_imported_first() -> None:
         "assert advgame.EpisodeResult.__name__ == 'EpisodeResult'\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
-
-
-# group -> the groups its modules must never import (at module level or inside functions)
-_LAYERS = {
-    "core": ("advgame.training", "advgame.evaluation", "advgame.cli"),
-    "disruptors": ("advgame.training", "advgame.evaluation", "advgame.cli"),
-    "training": ("advgame.evaluation", "advgame.cli"),
-}
-
-
-def _imported_modules(path: Path) -> set[str]:
-    import ast
-
-    names: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.ImportFrom) and node.module:
-            names.add(node.module)
-        elif isinstance(node, ast.Import):
-            names.update(alias.name for alias in node.names)
-    return names
-
-
-@pytest.mark.parametrize("group", sorted(_LAYERS))
-def test_core_groups_import_one_way(group: str) -> None:
-    """advgame.core and the disruptors know nothing of training or evaluation; training
-    knows nothing of evaluation (evaluation and the CLI build on both)."""
-    files = sorted((ROOT / "advgame" / group).glob("*.py"))
-    assert files, group
-    for path in files:
-        for name in _imported_modules(path):
-            bad = [b for b in _LAYERS[group] if name == b or name.startswith(b + ".")]
-            assert not bad, f"{path.relative_to(ROOT)} imports {name}"

@@ -14,9 +14,9 @@ import torch
 
 from advgame.adversaries import MADAttack
 from advgame.agents import PPOConfig
+from advgame.agents.side import Side
 from advgame.cli import main
 from advgame.core.views import view_factory
-from advgame.training.learning import Side
 
 
 def test_the_attack_reads_the_live_learner_and_collection_leaves_it_unchanged(

@@ -16,8 +16,8 @@ from advgame.adversaries.whitebox import MADAttack
 from advgame.core.episodes import rollout
 from advgame.core.policy import WhiteBox
 from advgame.disruptors import ObservationDisruptor
-from advgame.evaluation.jobs import EvalJob
-from advgame.evaluation.running import _ClockedSpec, run_unit
+from advgame.evaluation.table.jobs import EvalJob
+from advgame.evaluation.table.running import _ClockedSpec, run_unit
 from advgame.training.best_response import MixtureSpec
 
 ADV = "observation_adversary"

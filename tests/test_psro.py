@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from advgame.errors import ConfigError
-from advgame.evaluation.metasolver import nash
-from advgame.psro import PSROConfig, load_meta, resume_psro, run_psro
 from advgame.training.population import Population
+from advgame.workflows.metasolver import nash
+from advgame.workflows.psro import PSROConfig, load_meta, resume_psro, run_psro
 
 TINY = PSROConfig(
     scenario="InvertedPendulum-v5",
@@ -65,7 +65,7 @@ def test_each_iteration_adds_one_best_response_per_side(whole_run: Path) -> None
 
 _CHILD = """
 import sys
-from advgame.psro import PSROConfig, run_psro
+from advgame.workflows.psro import PSROConfig, run_psro
 cfg = PSROConfig(**{cfg})
 run_psro(cfg, sys.argv[1], workers=2)
 """
@@ -147,8 +147,8 @@ def test_a_run_directory_is_not_started_twice_and_configs_are_checked(whole_run:
 
 def test_unit_keys_depend_on_values_not_on_shared_objects() -> None:
     """A spec built here and the same spec read back from JSON name the same part file."""
-    from advgame.evaluation.executor import unit_key
-    from advgame.training.checkpoint import SB3Checkpoint
+    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.runner.run import unit_key
 
     path = "/runs/x/protagonist.zip"
     shared = (SB3Checkpoint(path, "ppo", None), SB3Checkpoint(path, "ppo", None))

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from advgame.agents.checkpoint import SB3Checkpoint
 from advgame.core.policy import ConstantPolicy
 from advgame.errors import ConfigError
 from advgame.evaluation import budget_sweep, evaluate
-from advgame.evaluation.executor import JobFailedError, run_units
-from advgame.training.checkpoint import SB3Checkpoint
+from advgame.runner.run import JobFailedError, run_units
 
 ray = pytest.importorskip("ray", reason="the ray extra: pip install -c constraints.txt '.[ray]'")
 
@@ -89,7 +89,7 @@ def fail(unit: tuple[str, str]) -> int:
 
 def fingerprint(spec: SB3Checkpoint) -> tuple[int, float]:
     """This worker's pid and the sum of the weights of the model it has for `spec`."""
-    from advgame.training.checkpoint import load_model
+    from advgame.agents.checkpoint import load_model
 
     params = load_model(spec.path, spec.algo).policy.parameters()
     return os.getpid(), float(sum(p.detach().sum() for p in params))
@@ -164,7 +164,7 @@ def test_the_cli_evaluates_on_ray_with_the_same_table(
 
 
 def test_psro_on_ray_equals_psro_here(local_ray: None, tmp_path: Path) -> None:
-    from advgame.psro import PSROConfig, load_meta, run_psro
+    from advgame.workflows.psro import PSROConfig, load_meta, run_psro
 
     cfg = PSROConfig(scenario="InvertedPendulum-v5", preset="rarl", iterations=1,
                      protagonist_steps=128, adversary_steps=128, protagonist_hparams={"n_steps": 64},

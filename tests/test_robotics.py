@@ -348,8 +348,8 @@ def test_her_needs_true_goals_in_info_and_a_goal_task() -> None:
 
 
 def test_training_loop_runs_sac_her_under_attack(tmp_path: Any, one_torch_thread: None) -> None:
+    from advgame.agents.checkpoint import SB3Checkpoint
     from advgame.training import train
-    from advgame.training.checkpoint import SB3Checkpoint
     from advgame.training.config import TrainConfig
 
     config = TrainConfig(

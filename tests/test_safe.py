@@ -290,7 +290,7 @@ def test_learned_adversaries_train_against_a_constrained_protagonist(tmp_path: P
 
 def test_the_report_gains_episode_cost_and_constraint_satisfaction(tmp_path: Path) -> None:
     from advgame.evaluation import AdversarySetup, evaluate, population_jobs
-    from advgame.evaluation.report import write_report
+    from advgame.reports.report import write_report
 
     def spin(obs: Any) -> list[float]:  # full torque: the fingertip exceeds the speed limit
         return [1.0, 1.0]
@@ -333,7 +333,7 @@ def test_save_and_load_restore_the_multiplier_and_the_learner(tmp_path: Path, al
 
 
 def test_the_report_limit_comes_from_the_runs_learner_configs(tmp_path: Path) -> None:
-    from advgame.evaluation.report import DEFAULT_COST_LIMIT, runs_cost_limit
+    from advgame.reports.report import DEFAULT_COST_LIMIT, runs_cost_limit
 
     for name, cfg in {
         "tight": {"protagonist_algo": "crpo", "protagonist_hparams": {"cost_limit": 4.0}},

@@ -12,7 +12,7 @@ import pytest
 
 from advgame.cli import main
 from advgame.errors import ConfigError, UnknownNameError
-from advgame.evaluation.columns import adversary_columns, default_threat
+from advgame.evaluation.table.columns import adversary_columns, default_threat
 
 TINY = [
     "--scenario", "Hopper-v5", "--iterations", "1", "--protagonist-steps", "64",

@@ -51,7 +51,7 @@ def test_a_config_file_with_its_own_game_trains_and_resumes(tmp_path: Path) -> N
 
 
 def test_adversary_options_on_the_command_line(tmp_path: Path) -> None:
-    from advgame.cli import _train_config, build_parser
+    from advgame.cli.app import _train_config, build_parser
 
     args = build_parser().parse_args(
         ["train", "--method", "atla", "--adversary", "observation_adversary=uniform:0.02",

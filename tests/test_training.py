@@ -28,12 +28,12 @@ import torch
 import advgame.core.registry
 import advgame.training.loop
 from advgame.adversaries import ConstantAdversary, ZeroAdversary
+from advgame.agents.checkpoint import SB3Checkpoint, _algo_class
 from advgame.cli import main
 from advgame.core.config import load_json
 from advgame.core.episodes import rollout
 from advgame.errors import ConfigError
 from advgame.training import METHODS, TrainConfig, learner_config, train
-from advgame.training.checkpoint import SB3Checkpoint, _algo_class
 from advgame.training.population import Member, Population
 
 HOPPER = "Hopper-v5"

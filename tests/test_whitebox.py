@@ -11,10 +11,10 @@ import torch
 
 import advgame
 from advgame.adversaries.whitebox import CriticAttack, MADAttack, PGDAttack
+from advgame.agents.checkpoint import SB3Policy
 from advgame.core.episodes import build_policies, rollout
 from advgame.disruptors import ActionDisruptor, ObservationDisruptor
 from advgame.errors import ConfigError
-from advgame.training.checkpoint import SB3Policy
 
 ADV = "observation_adversary"
 

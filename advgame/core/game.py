@@ -33,6 +33,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from advgame.core.disruptor import Disruptor, DisruptorSpec
 from advgame.core.moves import (
     ACT,
     SENSE,
@@ -45,7 +46,6 @@ from advgame.core.moving import Moves
 from advgame.core.policy import AgentInfo
 from advgame.core.schedule import PHASES, Schedule
 from advgame.core.task import TaskBase
-from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import ActionError, ConfigError, did_you_mean
 
 __all__ = ["Game", "Move"]
@@ -56,13 +56,16 @@ log = logging.getLogger(__name__)
 class Game(Moves, ParallelEnv):
     """A PettingZoo ParallelEnv of protagonists against bounded adversary agents.
 
-    Build one with `advgame.make`. Args:
+    Build one with `advgame.make`.
+
+    Args:
         task: the task base.
         disruptors: disruptor specs; each becomes one adversary agent.
         cost_weight: weight of the true cost in the payoff adversaries are paid on.
         phase: ``"train"`` or ``"eval"``; disruptors whose schedule is for the other phase are
             the identity (the paper's in-training / post-training settings).
         scenario_id: the registry id, for `repr` and reports.
+
     """
 
     metadata: ClassVar[dict[str, Any]] = {

@@ -14,11 +14,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from gymnasium import spaces
 
-from advgame.disruptors.base import all_finite
+from advgame.core.disruptor import all_finite
 from advgame.errors import ActionError, did_you_mean
 
 if TYPE_CHECKING:
-    from advgame.disruptors.base import Disruptor
+    from advgame.core.disruptor import Disruptor
 
 __all__ = [
     "ACT",

@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.disruptor import Disruptor
 from advgame.core.moves import ACT, SENSE, Move, protagonist_action
 from advgame.core.schedule import Schedule
 from advgame.core.task import StepResult, TaskBase
-from advgame.disruptors.base import Disruptor
 
 __all__ = ["Moves"]
 

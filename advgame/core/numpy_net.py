@@ -79,7 +79,7 @@ class NumpyNet:
         normalizer: tuple[np.ndarray, np.ndarray, float] | None = None,
         probe: bool = True,
     ) -> NumpyNet | None:
-        """The NumPy copy of torch `modules` (``nn.Sequential``s and layers, in order), or None.
+        """The NumPy copy of torch `modules` (layers and ``nn.Sequential`` blocks, in order), or None.
 
         None when a module is not ``nn.Linear``, ``nn.Tanh``, ``nn.ReLU`` or ``nn.Flatten``, or
         when the probe finds a batched row differs from the same row alone in any bit
@@ -221,7 +221,7 @@ def weights_stamp(modules: Sequence[Any]) -> tuple[Any, ...]:
 
 
 class NetCache:
-    """The `NumpyNet`s of a torch policy's heads, rebuilt when its weights or normalizer change.
+    """The `NumpyNet` copies of a torch policy's heads, rebuilt when weights or normalizer change.
 
     Example:
         >>> from torch import nn

@@ -19,7 +19,7 @@ from gymnasium import spaces
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:
-    from advgame.disruptors.base import Disruptor
+    from advgame.core.disruptor import Disruptor
 
 __all__ = [
     "AgentInfo",
@@ -65,7 +65,7 @@ class WhiteBox(Protocol):
 
     Every method takes a batch of *raw* observations as a float32 torch tensor ``[batch, obs]``
     and applies the policy's own frozen normalizer, so an attack works in the units the game
-    uses. Implemented by `advgame.training.checkpoint.SB3Policy` and the MAPPO/IPPO actor policies.
+    uses. Implemented by `advgame.agents.checkpoint.SB3Policy` and the MAPPO/IPPO actor policies.
 
     Optionally a policy also has ``numpy_net(head)``: ``"mean"`` (`action_mean`) or ``"value"``
     (`value`, for a policy without a Q critic) as an `advgame.core.numpy_net.NumpyNet`, the same

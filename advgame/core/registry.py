@@ -16,6 +16,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from advgame.core.moved import current
 from advgame.errors import (
     AdvgameError,
     ConfigError,
@@ -26,12 +27,15 @@ from advgame.errors import (
 )
 
 if TYPE_CHECKING:
+    from advgame.core.disruptor import DisruptorSpec
     from advgame.core.game import Game
-    from advgame.disruptors.base import DisruptorSpec
 
 __all__ = ["Preset", "ScenarioSpec", "list_scenarios", "load", "make", "register", "scenario_spec"]
 
-_BUILTIN = "advgame.scenarios"
+_BUILTIN = "advgame.scenarios.builtin"
+_KINDS = "advgame.disruptors.kinds:from_config"
+"""The built-in scenarios and disruptor kinds, reached by name (entry points), not imported:
+the registry sits below the folders that fill it, as Gymnasium's registry below its tasks."""
 _REGISTRY: dict[str, ScenarioSpec] = {}
 
 
@@ -182,8 +186,13 @@ def _task_error(spec: ScenarioSpec, kwargs: Mapping[str, Any], exc: Exception) -
 
 
 def load(entry_point: str) -> Any:
-    """Import ``"module:attr"`` (a callable, a class or a table)."""
+    """Import ``"module:attr"`` (a callable, a class or a table); old module names resolve.
+
+    A name written before its module moved (a population file's spec type, say) is looked up
+    where the module is now (`advgame.core.moved`).
+    """
     module, _, attr = entry_point.partition(":")
+    module, _ = current(module, attr)
     try:
         return getattr(importlib.import_module(module), attr)
     except (ImportError, AttributeError) as exc:
@@ -309,8 +318,9 @@ def _check_options(preset: Any, phase: Any, cost_weight: Any) -> None:
 
 
 def _as_specs(disruptors: Sequence[DisruptorSpec] | Mapping[str, Any]) -> tuple[DisruptorSpec, ...]:
-    from advgame.disruptors import DisruptorSpec, from_config
+    from advgame.core.disruptor import DisruptorSpec
 
+    from_config = load(_KINDS)
     if isinstance(disruptors, Mapping):
         out = []
         for kind, cfg in disruptors.items():

@@ -40,7 +40,7 @@ __all__ = ["GymVectorView", "VectorView"]
 
 
 class VectorView(DummyVecEnv):
-    """An SB3 `VecEnv` of `SingleAgentView`s stepped in lockstep (see the module docstring).
+    """An SB3 `VecEnv` of `SingleAgentView` views stepped in lockstep (see the module docstring).
 
     Args:
         env_fns: thunks that each build one view (`advgame.core.views.view_factory`), all of

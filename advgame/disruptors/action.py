@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 import numpy as np
 from gymnasium import spaces
 
-from advgame.disruptors.base import (
+from advgame.core.disruptor import (
     AdditiveDisruptor,
     Disruptor,
     DisruptorSpec,

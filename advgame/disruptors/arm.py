@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from advgame.disruptors.base import Disruptor, DisruptorSpec, as_budget
+from advgame.core.disruptor import Disruptor, DisruptorSpec, as_budget
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:

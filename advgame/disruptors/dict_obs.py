@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from advgame.disruptors.base import as_budget
+from advgame.core.disruptor import as_budget
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
 __all__ = ["SEP", "Leaf", "flat_space", "flatten", "layout", "leaves", "perturb"]

@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from advgame.core.disruptor import Disruptor, DisruptorSpec
 from advgame.core.fields import check_fields
-from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
 if TYPE_CHECKING:

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget
+from advgame.core.disruptor import AdditiveDisruptor, DisruptorSpec, as_budget
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:

@@ -9,14 +9,14 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 import numpy as np
 from gymnasium import spaces
 
-from advgame.disruptors import dict_obs
-from advgame.disruptors.base import (
+from advgame.core.disruptor import (
     AdditiveDisruptor,
     DisruptorSpec,
     as_budget,
     budget_array,
     resolve_targets,
 )
+from advgame.disruptors import dict_obs
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
 if TYPE_CHECKING:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from advgame.disruptors.base import AdditiveDisruptor, DisruptorSpec, as_budget, resolve_targets
+from advgame.core.disruptor import AdditiveDisruptor, DisruptorSpec, as_budget, resolve_targets
 from advgame.errors import ConfigError
 
 if TYPE_CHECKING:

@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from advgame.core.disruptor import Disruptor, DisruptorSpec
 from advgame.core.fields import check_fields
-from advgame.disruptors.base import Disruptor, DisruptorSpec
 from advgame.errors import BudgetError, ConfigError
 
 if TYPE_CHECKING:

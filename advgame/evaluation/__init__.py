@@ -1,41 +1,32 @@
-"""Robust evaluation: payoff tables of protagonists × adversaries × seeds, and robust metrics.
+"""Evaluation, the library: playing robustness tables and learning the attacks they need.
 
-One `EvalJob` is one cell of the payoff matrix: a protagonist against one adversary set-up over
-some seeds. Jobs are pure, picklable values, so `evaluate` runs them (one unit per seed) in
-this process, in a process pool or as Ray tasks (`advgame.evaluation.executor`). Every episode becomes
-one row of a `PayoffTable`, which saves to CSV/JSON and computes the design's robust metrics on
-the *true* return: nominal, mean, worst case, CVaR and the degradation from nominal::
+* `advgame.evaluation.table`: playing a table. Who plays (`protagonists`), against whom
+  (`columns`), the jobs of a table's cells (`jobs`), which cells can be played (`applicable`),
+  running them (`running`, `batched`), the resulting `PayoffTable` and its robust metrics
+  (`payoff`), and learned adversaries read back from runs (`snapshots`).
+* `advgame.evaluation.attacks`: attacks learned ahead of a table: the searched optimal attack
+  (`optimal`) and exploitability by a best response (`exploit`).
+
+Jobs run on `advgame.runner` (a process pool or Ray); results are written by `advgame.reports`;
+the ready-made workflows that do all of it (`evaluate_policies`, campaigns, the zoo) live in
+`advgame.workflows`. One `EvalJob` is one cell of the payoff matrix: a protagonist against one
+adversary set-up over some seeds; every episode becomes one row of a `PayoffTable`, which saves
+to CSV/JSON and computes the design's robust metrics on the *true* return::
 
     setups = {"nominal": AdversarySetup.nominal(),
               "gauss": AdversarySetup.from_preset("Hopper-v5", "state-gauss-0.1")}
     jobs = population_jobs("Hopper-v5", {"mine": my_policy}, setups, seeds=(0, 1))
     evaluate(jobs, workers=2).metrics(alpha=0.1)
 
-Who is evaluated and against whom, for fixed policies from anywhere: `sb3_protagonist` (an SB3
-model trained elsewhere, behind its `VecNormalize` statistics), `team_protagonist`,
-`run_protagonist`, `check_protagonists`; `adversary_columns` turns column specs
-(``preset:NAME``, ``population:RUN_DIR``, ...) into `AdversarySetup`s; `evaluate_policies` does
-all of it and writes a self-contained results folder with its report::
-
-    mine = sb3_protagonist("model.zip", normalizer="vecnormalize.pkl")
-    cols = adversary_columns("Hopper-v5", ["preset:state-gauss-0.1", "population:runs/atla"])
-    evaluate_policies("Hopper-v5", {"mine": mine}, "results", adversaries=cols)
-
-Jobs and their builders live in `advgame.evaluation.jobs`, tables and metrics in
-`advgame.evaluation.payoff`, protagonists in `advgame.evaluation.protagonists`, columns in
-`advgame.evaluation.columns`, `evaluate` and `run_job` in `advgame.evaluation.running`, the
-check of which cells a column can play in `advgame.evaluation.applicable`; this module
-re-exports them, so ``from advgame.evaluation import ...`` reaches all of them.
+This module only re-exports the table's public names, so ``from advgame.evaluation import ...``
+reaches them.
 """
 
 from __future__ import annotations
 
-from typing import Any
-
-from advgame.evaluation.applicable import not_applicable
-from advgame.evaluation.columns import COLUMN_KINDS, adversary_columns, describe_column
-from advgame.evaluation.executor import EXECUTORS
-from advgame.evaluation.jobs import (
+from advgame.evaluation.table.applicable import not_applicable
+from advgame.evaluation.table.columns import COLUMN_KINDS, adversary_columns, describe_column
+from advgame.evaluation.table.jobs import (
     SEED_STRIDE,
     AdversarySetup,
     EvalJob,
@@ -46,7 +37,7 @@ from advgame.evaluation.jobs import (
     split_seeds,
     unit_size,
 )
-from advgame.evaluation.payoff import (
+from advgame.evaluation.table.payoff import (
     COLUMNS,
     NOMINAL,
     PayoffTable,
@@ -55,13 +46,14 @@ from advgame.evaluation.payoff import (
     degradation,
     worst_case,
 )
-from advgame.evaluation.protagonists import (
+from advgame.evaluation.table.protagonists import (
     check_protagonists,
     run_protagonist,
     sb3_protagonist,
     team_protagonist,
 )
-from advgame.evaluation.running import evaluate, run_job, use_executor
+from advgame.evaluation.table.running import evaluate, run_job, use_executor
+from advgame.runner.run import EXECUTORS
 
 __all__ = [
     "COLUMNS",
@@ -80,7 +72,6 @@ __all__ = [
     "degradation",
     "describe_column",
     "evaluate",
-    "evaluate_policies",
     "lockstep_groups",
     "not_applicable",
     "population_jobs",
@@ -94,12 +85,3 @@ __all__ = [
     "use_executor",
     "worst_case",
 ]
-
-
-def __getattr__(name: str) -> Any:
-    """`evaluate_policies` lives in `advgame.evaluation.suite` (it writes reports), loaded on first use."""
-    if name == "evaluate_policies":
-        from advgame.evaluation.suite import evaluate_policies
-
-        return evaluate_policies
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

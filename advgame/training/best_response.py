@@ -1,10 +1,10 @@
 """Best-response training as a job: one learner against a fixed mixture of opponents.
 
 A `BestResponseJob` is a pure, picklable value; `train_best_response` trains its learner
-(`advgame.training.learning.Side`, an SB3 model on a `SingleAgentView`) against a
+(`advgame.agents.side.Side`, an SB3 model on a `SingleAgentView`) against a
 `MixtureSpec` of the other side's policies and returns the checkpoint *as bytes*, so the job
-can run on any worker of any node (`advgame.evaluation.executor.run_units`) and the driver
-writes the files where the run keeps them. `advgame.psro` builds these jobs.
+can run on any worker of any node (`advgame.runner.run.run_units`) and the driver
+writes the files where the run keeps them. `advgame.workflows.psro` builds these jobs.
 """
 
 from __future__ import annotations
@@ -126,7 +126,7 @@ def _normalized_targets(job: BestResponseJob) -> list[str]:
 
 def _opponent_std(job: BestResponseJob) -> np.ndarray | None:
     """The std of the most likely opponent checkpoint's normalizer (None without one)."""
-    from advgame.training.checkpoint import load_normalizer
+    from advgame.agents.checkpoint import load_normalizer
 
     for mix in job.opponents.values():
         spec = mix.specs[int(np.argmax(mix.weights))]
@@ -141,9 +141,9 @@ def train_best_response(job: BestResponseJob) -> dict[str, Any]:
     """Train the job's learner; return ``{"files": {name: bytes}, "model", "normalizer", "algo"}``."""
     import torch
 
+    from advgame.agents.side import Side
     from advgame.core.views import view_factory
     from advgame.training.config import learner_config
-    from advgame.training.learning import Side
 
     torch.set_num_threads(1)
     learner = learner_config(job.algo, dict(job.hparams or {}))

@@ -28,8 +28,8 @@ SAFE_ALGOS = ("ppo-lag", "ppo-pid", "crpo", "pcrpo")
 """Constrained protagonist learners (safe scenarios): PPO-Lagrangian, PID-Lagrangian, CRPO,
 PCRPO."""
 TEAM_ALGOS = ("mappo", "ippo", *SAFE_ALGOS)
-"""Protagonist learners that train the whole protagonist team on `advgame.core.team.TeamView`s
-(our torch learners) instead of one SB3 agent."""
+"""Protagonist learners that train the whole protagonist team on team views
+(`advgame.core.team.TeamView`; our torch learners) instead of one SB3 agent."""
 PROTAGONISTS = "protagonists"
 """The key of the protagonist side in `Trainer.sides` (one agent or a whole team)."""
 

@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from advgame.agents.side import Side
+from advgame.agents.stats import EpisodeStats
 from advgame.core.config import write_atomic
 from advgame.core.episodes import filler_action, rollout
 from advgame.core.files import read_csv, read_json, reading, require
@@ -21,7 +23,6 @@ from advgame.core.registry import load, make
 from advgame.core.views import view_factory
 from advgame.errors import FileFormatError
 from advgame.training.config import PROTAGONISTS, learner_config
-from advgame.training.learning import EpisodeStats, Side
 from advgame.training.population import ZERO, Member, Population
 from advgame.training.trainer import Trainer
 

@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
+from advgame.agents.stats import EpisodeStats
 from advgame.core.registry import make
 from advgame.errors import ConfigError
 from advgame.training.config import PROTAGONISTS, TEAM_ALGOS, TrainConfig
-from advgame.training.learning import EpisodeStats
 from advgame.training.population import Member, Population
 
 __all__ = ["Trainer", "scaled"]

@@ -49,10 +49,10 @@ def sweep_jobs(scenario: str, eps: float, released: dict, seeds: int) -> list:
 
 def main() -> None:
     """Run the sweep over the zoo's agents of ``--scenario``; write the CSV and the plots."""
-    from advgame import zoo
     from advgame.evaluation import evaluate
-    from advgame.evaluation.plots import plot_budget_curve
+    from advgame.reports.plots import plot_budget_curve
     from advgame.scenarios.mujoco import ATLA_EPS
+    from advgame.workflows import zoo
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--scenario", default="Hopper-v5")

@@ -1,0 +1,1 @@
+"""Attacks learned ahead of a table: the searched optimal attack and exploitability."""

@@ -1,0 +1,239 @@
+"""The learned optimal attack, searched: the strongest of several trained adversaries per row.
+
+ATLA (Zhang et al. 2021) judges a protagonist by the "optimal attack": an observation adversary
+trained by RL against the frozen policy, the strongest of a small hyper-parameter search. Here
+every protagonist of a table, whatever its kind (a run's, an SB3 checkpoint, a team, a zoo
+agent; only a fixed function has no networks to matter, and is attacked all the same), gets
+one `BestResponseJob` per point of `OPTIMAL_GRID`, trained as jobs on the executor (local pool
+or Ray, resumable through their part files); each candidate is then played for a few seeds and
+the one under which the protagonist's true return is lowest is kept. `optimal_jobs` gives the
+table's ``attack optimal`` column: one job per protagonist with its own adversary.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from advgame.errors import ConfigError
+from advgame.evaluation.table.jobs import EvalJob
+from advgame.evaluation.table.payoff import NOMINAL, PayoffTable
+
+__all__ = [
+    "OPTIMAL",
+    "OPTIMAL_GRID",
+    "OptimalSearch",
+    "optimal_jobs",
+    "released_jobs",
+    "write_exploitability",
+]
+
+log = logging.getLogger(__name__)
+
+OPTIMAL = "attack optimal"
+"""The column name of the searched learned attack."""
+OPTIMAL_GRID: tuple[dict[str, Any], ...] = (
+    {"learning_rate": 3e-4, "ent_coef": 0.0},
+    {"learning_rate": 1e-3, "ent_coef": 0.0},
+    {"learning_rate": 3e-4, "ent_coef": 0.01},
+    {"learning_rate": 1e-3, "ent_coef": 0.01, "clip_range": 0.1},
+)
+"""PPO settings of the adversary tried per protagonist (learning rate, entropy bonus, clip):
+ATLA searches the optimal attack's learning rate and entropy; this is a small such grid."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class OptimalSearch:
+    """How the optimal attack is searched for every protagonist."""
+
+    steps: int
+    """Environment steps each candidate adversary trains."""
+    grid: tuple[Mapping[str, Any], ...] = OPTIMAL_GRID
+    """PPO overrides, one candidate per entry."""
+    select_seeds: int = 2
+    """Evaluation seeds on which the candidates are compared (disjoint from the table's)."""
+    seed: int = 0
+    """Seeds the candidates' training."""
+    workers: int = 1
+    """Training jobs at once (local pool) or in flight (Ray)."""
+    executor: str | None = None
+    """``"local"`` or ``"ray"``; None: the default of `advgame.evaluation.use_executor`."""
+
+    def __post_init__(self) -> None:
+        if type(self.steps) is not int or self.steps < 1:
+            raise ConfigError(f"OptimalSearch.steps must be an int >= 1, got {self.steps!r}.")
+        if not self.grid or not all(isinstance(g, Mapping) for g in self.grid):
+            raise ConfigError(f"OptimalSearch.grid must be PPO override dicts, got {self.grid!r}.")
+        if type(self.select_seeds) is not int or self.select_seeds < 1:
+            raise ConfigError(
+                f"OptimalSearch.select_seeds must be an int >= 1, got {self.select_seeds!r}."
+            )
+
+
+@dataclass
+class _Found:
+    """The search's result for one protagonist."""
+
+    spec: Any
+    candidates: list[dict[str, Any]] = field(default_factory=list)
+
+
+def optimal_jobs(
+    scenario: str,
+    threat: str,
+    agent: str,
+    protagonists: Mapping[str, Any],
+    search: OptimalSearch,
+    out: Path,
+    *,
+    seeds: Sequence[int],
+    episodes: int = 1,
+) -> list[EvalJob]:
+    """The ``attack optimal`` column's jobs: per protagonist, its strongest searched adversary.
+
+    Candidates are written under ``out/optimal/NAME/K/`` and the search to
+    ``out/optimal.json`` (every candidate's settings and selection return, the one kept).
+    """
+    found = _search(scenario, threat, agent, protagonists, search, out)
+    record = {
+        n: {"kept": f.spec.path, "kept_normalizer": f.spec.normalizer, "candidates": f.candidates}
+        for n, f in found.items()
+    }
+    (out / "optimal.json").write_text(json.dumps(record, indent=2, default=str) + "\n")
+    kept = {n: f.spec for n, f in found.items()}
+    return released_jobs(
+        scenario, threat, agent, protagonists, kept, seeds=seeds, episodes=episodes
+    )
+
+
+def released_jobs(
+    scenario: str,
+    threat: str,
+    agent: str,
+    protagonists: Mapping[str, Any],
+    adversaries: Mapping[str, Any],
+    *,
+    seeds: Sequence[int],
+    episodes: int = 1,
+) -> list[EvalJob]:
+    """The ``attack optimal`` column from adversaries already found: each row plays its own.
+
+    `adversaries` is ``{protagonist: spec of its strongest learned adversary}``, from a search
+    (`optimal_jobs`) or released with the agent (`advgame.workflows.zoo.load(..., adversary=True)`); it
+    plays `agent` of `scenario` in the `threat` preset. Every protagonist needs one.
+    """
+    missing = sorted(set(protagonists) - set(adversaries))
+    if missing:
+        raise ConfigError(
+            f"No adversary for {missing} in the {OPTIMAL!r} column; every row plays its own."
+        )
+    return [
+        EvalJob(
+            scenario=scenario,
+            make_kwargs={"preset": threat},
+            protagonist=name,
+            protagonist_spec=protagonists[name],
+            adversary=OPTIMAL,
+            adversary_specs={agent: adversaries[name]},
+            seeds=tuple(seeds),
+            episodes=episodes,
+        )
+        for name in protagonists
+    ]
+
+
+def _search(
+    scenario: str,
+    threat: str,
+    agent: str,
+    protagonists: Mapping[str, Any],
+    search: OptimalSearch,
+    out: Path,
+) -> dict[str, _Found]:
+    """Train every candidate as executor jobs, write their files, keep each row's strongest."""
+    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.core.registry import make
+    from advgame.evaluation.table.running import _DEFAULT_EXECUTOR, evaluate
+    from advgame.runner.run import run_units
+    from advgame.training.best_response import BestResponseJob, MixtureSpec, train_best_response
+
+    game = make(scenario, preset=threat)
+    ids = game.protagonists
+    game.close()
+    units, where = [], []
+    for name, spec in protagonists.items():
+        specs = dict(spec) if isinstance(spec, Mapping) else dict.fromkeys(ids, spec)
+        opponents = {a: MixtureSpec((s,), (1.0,)) for a, s in specs.items()}
+        for k, hparams in enumerate(search.grid):
+            units.append(
+                BestResponseJob(
+                    name=f"{name}/{k}", scenario=scenario, make_kwargs={"preset": threat},
+                    agent=agent, hparams=dict(hparams), opponents=opponents,
+                    steps=search.steps, seed=search.seed + k,
+                )
+            )  # fmt: skip
+            where.append((name, k))
+    kind = search.executor or _DEFAULT_EXECUTOR[0]
+    log.info("optimal attack: %d candidates of %d steps", len(units), search.steps)
+    records = run_units(train_best_response, units, executor=kind, workers=search.workers,
+                        parts_dir=out / "optimal" / "parts")  # fmt: skip
+    cands: dict[str, list[Any]] = {}
+    for (name, k), rec in zip(where, records, strict=True):
+        folder = out / "optimal" / name / str(k)
+        folder.mkdir(parents=True, exist_ok=True)
+        for fname, data in rec.value["files"].items():
+            (folder / fname).write_bytes(data)
+        norm = rec.value["normalizer"]
+        cands.setdefault(name, []).append(
+            SB3Checkpoint(
+                str(folder / rec.value["model"]),
+                rec.value["algo"],
+                str(folder / norm) if norm else None,
+                deterministic=True,
+            )
+        )
+    select = tuple(range(10_000, 10_000 + search.select_seeds))  # apart from the table's seeds
+    jobs = [
+        EvalJob(scenario=scenario, make_kwargs={"preset": threat}, protagonist=name,
+                protagonist_spec=protagonists[name], adversary=f"candidate {k}",
+                adversary_specs={agent: c}, seeds=select)
+        for name, cs in cands.items() for k, c in enumerate(cs)
+    ]  # fmt: skip
+    table = evaluate(jobs, progress=False)
+    found = {}
+    for name, cs in cands.items():
+        means = [float(np.mean(table.values(name, f"candidate {k}"))) for k in range(len(cs))]
+        best = int(np.argmin(means))
+        found[name] = _Found(cs[best])
+        found[name].candidates = [
+            {"hparams": dict(g), "selection_return": m, "kept": k == best}
+            for k, (g, m) in enumerate(zip(search.grid, means, strict=True))
+        ]
+    return found
+
+
+def write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:
+    """Write ``exploitability.json``: per protagonist, nominal and optimal-attack returns, the drop.
+
+    `table` holds the nominal and ``attack optimal`` columns; `steps` is each candidate's
+    training budget.
+    """
+    results = {}
+    for name in table.protagonists:
+        nom, att = table.values(name, NOMINAL), table.values(name, OPTIMAL)
+        if not (nom.size and att.size):
+            continue
+        results[name] = {
+            "preset": threat,
+            "nominal_return": float(nom.mean()),
+            "best_response_return": float(att.mean()),
+            "exploitability": float(nom.mean() - att.mean()),
+            "best_response_steps": float(steps),
+        }
+    (out / "exploitability.json").write_text(json.dumps(results, indent=2) + "\n")

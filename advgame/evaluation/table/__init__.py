@@ -1,0 +1,1 @@
+"""Playing a robustness table: protagonists × adversary columns × seeds, into a `PayoffTable`."""

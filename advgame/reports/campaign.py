@@ -1,0 +1,175 @@
+"""A campaign's table: ``campaign.md``/``campaign.csv`` and its training curves, from its results.
+
+`campaign_table` is the last step of `advgame.workflows.campaign.run_campaign`; it reads the campaign's
+payoff table (``results/payoff.csv``) and its finished runs' progress files, and writes per
+method the median agent and the spread over seeds, a cost table for safe campaigns, and
+``curves.png`` (each method's mean training curve over its seeds).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from collections.abc import Sequence
+from typing import Any, Protocol
+
+import numpy as np
+
+from advgame.errors import FileFormatError
+
+__all__ = ["CampaignGrid", "campaign_table"]
+
+
+class CampaignGrid(Protocol):
+    """What the table needs of a campaign (`advgame.workflows.campaign.Campaign` is one)."""
+
+    @property
+    def scenario(self) -> str:
+        """The scenario id."""
+        ...
+
+    @property
+    def methods(self) -> Sequence[str]:
+        """The methods, in table order."""
+        ...
+
+    @property
+    def cost_limit(self) -> float | None:
+        """The episode cost limit of a safe campaign (None: no cost columns)."""
+        ...
+
+    def method_runs(self, method: str) -> list[str]:
+        """The runs (``METHOD-sSEED``) of `method`."""
+        ...
+
+
+def campaign_table(campaign: CampaignGrid, out: Path, finished: Path) -> Path:
+    """Write ``campaign.md`` and ``campaign.csv`` from the results; return the Markdown path.
+
+    `out` is the campaign's folder (its ``results/``); `finished` holds the finished runs,
+    each with its ``progress.csv`` (for the training curves).
+    """
+    from advgame.evaluation import NOMINAL, PayoffTable, ci95
+
+    path = out / "results" / "payoff.csv"
+    if not path.exists():
+        raise FileFormatError(f"{path} is missing; evaluate the campaign first.")
+    table = PayoffTable.from_csv(path)
+    metrics = {m["protagonist"]: m for m in table.metrics(nominal=NOMINAL)}
+    rows = []
+    for method in campaign.methods:
+        agents = [r for r in campaign.method_runs(method) if r in metrics]
+        if not agents:
+            continue
+        nat = np.array([metrics[a]["nominal"] for a in agents])
+        worst = np.array([metrics[a]["worst"] for a in agents])
+        median = agents[int(np.argsort(worst)[(len(agents) - 1) // 2])]
+        rows.append({
+            "method": method, "seeds": len(agents), "median_agent": median,
+            "natural": metrics[median]["nominal"], "worst": metrics[median]["worst"],
+            "worst_attack": metrics[median]["worst_adversary"],
+            "natural_iqr": _iqr(nat), "worst_iqr": _iqr(worst),
+            "natural_ci95": ci95(nat), "worst_ci95": ci95(worst),
+        })  # fmt: skip
+    csv_lines = [",".join(rows[0])] + [",".join(str(v) for v in r.values()) for r in rows]
+    (out / "campaign.csv").write_text("\n".join(csv_lines) + "\n")
+    md = out / "campaign.md"
+    text = _table_md(campaign, rows)
+    if campaign.cost_limit is not None:
+        text += "\n" + _cost_md(campaign, table.safety(campaign.cost_limit))
+    if _curves(campaign, out, finished) is not None:
+        text += (
+            f"\n![training curves]({CURVES})\n\n[{CURVES}]({CURVES}): each method's training "
+            "return (and episode cost) in its training phases, the mean over its finished runs "
+            "(how many in brackets) with their min-max band.\n"
+        )
+    md.write_text(text)
+    return md
+
+
+CURVES = "curves.png"
+"""The campaign's figure of training curves per method, beside ``campaign.md``."""
+
+
+def _curves(campaign: CampaignGrid, out: Path, finished: Path) -> Path | None:
+    """Write ``curves.png``: return (and cost, for safe campaigns) over steps, per method."""
+    from advgame.reports.plots import plot_method_curves
+
+    groups = {
+        m: [finished / r / "progress.csv" for r in campaign.method_runs(m)]
+        for m in campaign.methods
+    }
+    columns = ["protagonist_phase_true_return"]
+    lines = {}
+    if campaign.cost_limit is not None:
+        columns.append("protagonist_phase_true_cost")
+        lines["protagonist_phase_true_cost"] = float(campaign.cost_limit)
+    return plot_method_curves(groups, out / CURVES, columns, lines=lines)
+
+
+def _cost_md(campaign: CampaignGrid, cells: list[dict[str, Any]]) -> str:
+    """Per method and column: return and episode cost over seeds, and the satisfaction rate."""
+    from advgame.evaluation import ci95
+
+    lines = [
+        f"## Cost (limit {campaign.cost_limit:g} per episode)",
+        "",
+        "| method | column | seeds | return | ±95 % | episode cost | ±95 % | cost ≤ limit |",
+        "|" + "---|" * 8,
+    ]
+    for method in campaign.methods:
+        runs = set(campaign.method_runs(method))
+        mine = [c for c in cells if c["protagonist"] in runs]
+        for column in dict.fromkeys(c["adversary"] for c in mine):
+            sel = [c for c in mine if c["adversary"] == column]
+            ret = [c["return"] for c in sel]
+            cost = [c["cost"] for c in sel]
+            episodes = sum(c["episodes"] for c in sel)
+            ok = sum(c["satisfied"] * c["episodes"] for c in sel) / episodes
+            cells_ = [method, column, len(sel), float(np.mean(ret)), ci95(ret),
+                      float(np.mean(cost)), ci95(cost), f"{100 * ok:.0f} %"]  # fmt: skip
+            lines.append(_row(cells_))
+    lines += [
+        "",
+        "Return and episode cost are the means over the method's agents of each agent's mean "
+        "over its evaluation episodes (true reward, true cost); ±95 % is the Student-t "
+        "half-width over agents; cost ≤ limit is the share of all the method's evaluation "
+        "episodes within the limit.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _iqr(values: np.ndarray) -> str:
+    q1, q3 = np.percentile(values, [25, 75])
+    return f"{q1:.4g}–{q3:.4g}"
+
+
+def _fmt(v: Any) -> str:
+    return (
+        f"{v:.4g}"
+        if isinstance(v, float) and not math.isnan(v)
+        else ("–" if isinstance(v, float) else str(v))
+    )
+
+
+def _row(cells: list[Any]) -> str:
+    """One Markdown table row of `cells`, numbers to four significant digits."""
+    return "| " + " | ".join(_fmt(c) for c in cells) + " |"
+
+
+def _table_md(campaign: CampaignGrid, rows: list[dict[str, Any]]) -> str:
+    head = "| method | seeds | median agent | natural | IQR | ±95 % | worst attack | worst | IQR | ±95 % |"
+    lines = [f"# Campaign: {campaign.scenario}", "", head, "|" + "---|" * 10]
+    for r in rows:
+        cells = [r["method"], r["seeds"], r["median_agent"], r["natural"], r["natural_iqr"],
+                 r["natural_ci95"], r["worst_attack"], r["worst"], r["worst_iqr"], r["worst_ci95"]]  # fmt: skip
+        lines.append(_row(cells))
+    lines += [
+        "",
+        "The median agent of a method is its run with the median worst-of-attacks return (the "
+        "lowest mean true return over the table's attack columns); natural is its nominal "
+        "return. IQR and ±95 % (Student t) are over the method's seeds. Data: "
+        "[results/payoff.csv](results/payoff.csv), the full report: "
+        "[results/report.md](results/report.md).",
+    ]
+    return "\n".join(lines) + "\n"

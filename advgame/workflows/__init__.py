@@ -1,0 +1,1 @@
+"""Workflows built on the library: campaigns, the zoo, PSRO, ready-made evaluations, the demo."""

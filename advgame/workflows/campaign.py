@@ -1,0 +1,255 @@
+"""Campaigns: a grid of methods × seeds trained, evaluated in one threat model, and tabled.
+
+A campaign file (TOML) names a scenario, the methods (`advgame.training.METHODS`) and seeds,
+the training budget shared by every run and per method, and the evaluation (columns, seeds,
+the threat model, the optimal attack's budget)::
+
+    scenario = "Hopper-v5"
+    methods = ["ppo", "atla"]
+    seeds = [0, 1, 2]
+
+    [train]                    # TrainConfig fields for every run
+    iterations = 976
+    protagonist_steps = 2048
+
+    [train.atla]               # and for one method
+    adversary_steps = 2048
+
+A name in ``methods`` may also be a variant of a method: its section says which method it
+varies, and the rest of the section is the variation (a training preset, hyper-parameters)::
+
+    methods = ["crpo", "crpo-noisy"]
+
+    [train.crpo-noisy]
+    method = "crpo"
+    preset = "action-gauss-0.3"
+
+    [evaluate]
+    adversaries = ["attacks"]  # column specs (advgame.evaluation.table.columns)
+    threat = "atla"
+    seeds = 10
+    exploitability = 0         # steps of the searched optimal attack (0: none)
+    cost_limit = 25            # safe scenarios: add the cost table (episode cost ≤ limit)
+
+`run_campaign` trains every run that is not finished, two (``workers``) at a time as jobs on
+the executor (a local process pool or Ray); a run that was interrupted resumes from its last
+iteration (``runs/``), a finished one is compacted to its last checkpoint and moved to
+``finished/`` in one rename (small enough to commit; never trained again). It then evaluates every finished run's
+final protagonist in one table (finished evaluation units are read back, not replayed) and
+writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-attacks
+return, the interquartile range and the 95 % interval over seeds of its natural and
+worst-of-attacks returns; with a ``cost_limit`` (safe scenarios), per method and column the
+return and episode cost (means over seeds with 95 % intervals) and the share of evaluation
+episodes whose cost stays within the limit. ``status.json`` says at every step what is done.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from advgame.core.config import read_json, write_atomic
+from advgame.errors import ConfigError
+from advgame.reports.campaign import campaign_table
+from advgame.workflows.campaign_grid import Campaign, load_campaign
+
+__all__ = ["Campaign", "campaign_table", "load_campaign", "run_campaign"]
+
+log = logging.getLogger(__name__)
+
+
+def _progress(run_dir: Path) -> int:
+    """The last finished iteration of a run (0: none)."""
+    if not (run_dir / "state.json").exists():
+        return 0
+    return int(read_json(run_dir / "state.json", "run state", ("iteration",))["iteration"])
+
+
+class _StatusEach:
+    """Rewrites ``status.json`` each time a run finishes (the executor's progress hook)."""
+
+    def __init__(self, campaign: Campaign, out: Path, training: Sequence[str]) -> None:
+        self.campaign, self.out, self.training = campaign, out, training
+
+    def update(self) -> None:
+        """One more unit finished: record what is on disk now."""
+        write_status(self.campaign, self.out, training=self.training)
+
+
+def _train_unit(unit: tuple[Any, str, str]) -> str:
+    """Train or resume one run to its end, then keep it compact in ``finished/`` (a worker)."""
+    from advgame.training import resume, train
+
+    config, partial, finished = unit
+    path = Path(partial)
+    if (path / "config.json").exists():
+        resume(path, progress=False)
+    else:
+        train(config, path, progress=False)
+    compact(path)
+    Path(finished).parent.mkdir(parents=True, exist_ok=True)
+    path.rename(finished)  # one rename: ``finished/`` never holds half a run
+    return finished
+
+
+FINISHED = "finished"
+"""The campaign's folder of finished, compacted runs (``runs/`` holds those in training)."""
+
+
+def run_dir(out: Path, run: str) -> Path:
+    """Where run `run` of the campaign in `out` is: ``finished/RUN`` once done, else ``runs/RUN``."""
+    done = out / FINISHED / run
+    return done if done.exists() else out / "runs" / run
+
+
+def compact(run: Path) -> None:
+    """Keep what a finished run is evaluated and released from: its last checkpoint.
+
+    Earlier checkpoint folders and TensorBoard logs are deleted and the population keeps the
+    members whose files remain, so a finished run is a few hundred KB that can be committed
+    (``config.json``, ``state.json``, ``population.json``, ``progress.csv``, the last
+    checkpoint).
+    """
+    import shutil
+
+    from advgame.training.population import Population
+
+    state = read_json(run / "state.json", "run state", ("checkpoint",))
+    last = (run / state["checkpoint"]).resolve()
+    for folder in (run / "checkpoints").iterdir():
+        if folder.resolve() != last:
+            shutil.rmtree(folder)
+    shutil.rmtree(run / "tb", ignore_errors=True)
+    population = Population.load(run / "population.json")
+    population.members = [m for m in population if _files_exist(m.spec)]
+    population.save(run / "population.json")
+
+
+def _files_exist(spec: Any) -> bool:
+    return all(Path(getattr(spec, f)).exists() for f in ("path",) if getattr(spec, f, None))
+
+
+def run_campaign(
+    campaign: Campaign,
+    out: str | Path,
+    *,
+    workers: int = 2,
+    executor: str = "local",
+    address: str | None = None,
+    stage: str = "all",
+    max_runs: int | None = None,
+    progress: bool = True,
+    only: Sequence[str] | None = None,
+) -> Path:
+    """Train what is not finished, evaluate, write the table; return ``campaign.md``.
+
+    Args:
+        campaign: the grid.
+        out: its folder (``runs/``, ``results/``, ``status.json``, ``campaign.md``).
+        workers: training runs at once (local pool) or in flight (Ray); also the evaluation's.
+        executor: ``"local"`` or ``"ray"``.
+        address: a Ray cluster address.
+        stage: ``"train"``, ``"evaluate"`` (finished runs only) or ``"all"``.
+        max_runs: train at most this many unfinished runs now (the rest another time).
+        progress: progress bars for the evaluation.
+        only: train only these runs (``METHOD-sSEED``), in this order: how a session picks the
+            pieces that fit its time.
+
+    """
+    from advgame.runner.run import run_units
+
+    if stage not in ("train", "evaluate", "all"):
+        raise ConfigError(f"stage must be 'train', 'evaluate' or 'all', got {stage!r}.")
+    out = Path(out)
+    (out / "runs").mkdir(parents=True, exist_ok=True)
+    if stage in ("train", "all"):
+        names = campaign.runs() if only is None else list(only)
+        unknown = sorted(set(names) - set(campaign.runs()))
+        if unknown:
+            raise ConfigError(
+                f"No run {unknown[0]!r} in the campaign; its runs: {', '.join(campaign.runs())}."
+            )
+        todo = [r for r in names if _progress(run_dir(out, r)) < campaign.config(r).iterations]
+        todo = todo[:max_runs] if max_runs is not None else todo
+        write_status(campaign, out, training=todo)
+        if todo:
+            log.info("campaign: training %d run(s): %s", len(todo), todo)
+            units = [
+                (campaign.config(r), str(out / "runs" / r), str(out / FINISHED / r)) for r in todo
+            ]
+            run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
+                      address=address, max_retries=1,
+                      progress=_StatusEach(campaign, out, todo))  # fmt: skip
+    status = write_status(campaign, out)
+    if stage == "train":
+        return out / "status.json"
+    done = [r for r, s in status["runs"].items() if s["state"] == "done"]
+    if not done:
+        raise ConfigError(f"No finished run in {out / 'runs'} to evaluate; train first.")
+    _evaluate(campaign, out, done, workers, executor, address, progress)
+    path = campaign_table(campaign, out, out / FINISHED)
+    write_status(campaign, out)
+    return path
+
+
+def _evaluate(
+    campaign: Campaign,
+    out: Path,
+    done: Sequence[str],
+    workers: int,
+    executor: str,
+    address: str | None,
+    progress: bool,
+) -> None:
+    """Every finished run's protagonist in one table (finished units are read back)."""
+    from advgame.evaluation import use_executor
+    from advgame.workflows.suite import evaluate_runs
+
+    with use_executor(executor, address):
+        evaluate_runs(
+            [run_dir(out, r) for r in done],
+            out / "results",
+            seeds=campaign.eval_seeds,
+            workers=workers,
+            exploitability_steps=campaign.exploitability,
+            adversaries=campaign.adversaries,
+            threat=campaign.threat,
+            budgets=(),
+            progress=progress,
+            resume=True,
+        )
+
+
+def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) -> dict[str, Any]:
+    """Write ``status.json``: each run's state and iteration, and the evaluation's."""
+    runs = {}
+    for r in campaign.runs():
+        it, of = _progress(run_dir(out, r)), campaign.config(r).iterations
+        state = (
+            "done"
+            if it >= of
+            else ("training" if r in training else "partial" if it else "pending")
+        )
+        runs[r] = {"state": state, "iteration": it, "of": of}
+    table = out / "campaign.md"
+    status = {
+        "scenario": campaign.scenario,
+        "runs": runs,
+        "evaluated": sorted(_evaluated(out)),
+        "table": table.name if table.exists() else None,
+    }
+    write_atomic(out / "status.json", json.dumps(status, indent=2) + "\n")
+    return status
+
+
+def _evaluated(out: Path) -> set[str]:
+    """Runs that have rows in the campaign's payoff table."""
+    path = out / "results" / "payoff.csv"
+    if not path.exists():
+        return set()
+    from advgame.evaluation import PayoffTable
+
+    return set(PayoffTable.from_csv(path).protagonists)

@@ -1,0 +1,176 @@
+"""A campaign file: the grid (scenario, methods × seeds, budgets) and its evaluation, checked.
+
+`load_campaign` reads the TOML file (see `advgame.workflows.campaign` for its layout) into a
+`Campaign`, which checks every field when it is made: each run's `TrainConfig`, and the
+``[evaluate]`` section as the evaluation will read it (the threat model is a preset of the
+scenario, the column specs parse and build, the optimal attack has an observation budget),
+so a typo stops the campaign before hours of training rather than after.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from advgame.errors import ConfigError
+
+__all__ = ["Campaign", "load_campaign"]
+
+_LABEL = re.compile(r"[a-z0-9][a-z0-9._-]*")
+"""What a campaign's method name may be (it names run folders and zoo entries)."""
+_RUN = re.compile(r".*-s[0-9]+")
+"""A run name's ending; a method name must not have it (``NAME-sSEED`` splits at the last)."""
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A grid of methods × seeds on one scenario, and how it is evaluated."""
+
+    scenario: str
+    """Registered scenario id."""
+    methods: tuple[str, ...]
+    """Names in `advgame.training.METHODS`, or variants whose `per_method` section names one
+    under ``method``."""
+    seeds: tuple[int, ...]
+    """Training seeds of every method."""
+    train: Mapping[str, Any] = field(default_factory=dict)
+    """`TrainConfig` fields for every run."""
+    per_method: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    """`TrainConfig` fields for the runs of one method (over `train`); a variant's also names
+    its ``method``."""
+    adversaries: tuple[str, ...] = ("attacks",)
+    """Evaluation column specs."""
+    threat: str | None = None
+    """The table's threat model (None: `advgame.evaluation.table.columns.default_threat`)."""
+    eval_seeds: int = 5
+    """Evaluation seeds per cell."""
+    exploitability: int = 0
+    """Steps of each candidate of the searched optimal attack (0: no optimal column)."""
+    cost_limit: float | None = None
+    """Episode cost limit of a safe campaign: adds the cost table (None: no cost table)."""
+
+    def __post_init__(self) -> None:
+        from advgame.training import METHODS
+
+        unknown = [m for m in self.methods if self.base_method(m) not in METHODS]
+        if not self.methods or unknown:
+            raise ConfigError(
+                f"Campaign methods must be names of advgame.training.METHODS {sorted(METHODS)} "
+                f"or variants whose [train.NAME] section names one as `method`, got "
+                f"{list(self.methods)!r}."
+            )
+        odd = [m for m in self.methods if not _LABEL.fullmatch(m) or _RUN.fullmatch(m)]
+        if odd or len(set(self.methods)) != len(self.methods):
+            raise ConfigError(
+                f"Campaign method names must be distinct, lowercase letters, digits, '-', '_' "
+                f"or '.', and not end in -s<digits> (run names do), got {list(self.methods)!r}."
+            )
+        if not self.seeds or not all(type(s) is int and s >= 0 for s in self.seeds):
+            raise ConfigError(f"Campaign seeds must be ints >= 0, got {list(self.seeds)!r}.")
+        stray = set(self.per_method) - set(self.methods)
+        if stray:
+            raise ConfigError(f"[train.{sorted(stray)[0]}] names no method of the campaign.")
+        if type(self.eval_seeds) is not int or self.eval_seeds < 1:
+            raise ConfigError(f"evaluate.seeds must be an int >= 1, got {self.eval_seeds!r}.")
+        if type(self.exploitability) is not int or self.exploitability < 0:
+            raise ConfigError(
+                f"evaluate.exploitability must be an int >= 0, got {self.exploitability!r}."
+            )
+        limit = self.cost_limit
+        if limit is not None and (
+            isinstance(limit, bool) or not isinstance(limit, int | float) or not limit >= 0
+        ):
+            raise ConfigError(f"evaluate.cost_limit must be a number >= 0, got {limit!r}.")
+        for name in self.runs():  # every TrainConfig is checked before anything runs
+            self.config(name)
+        self._check_evaluation()
+
+    def _check_evaluation(self) -> None:
+        """The [evaluate] section as the evaluation will read it, hours of training earlier."""
+        from advgame.evaluation.table.columns import check_columns
+
+        if not isinstance(self.adversaries, tuple) or not all(
+            isinstance(a, str) for a in self.adversaries
+        ):
+            raise ConfigError(
+                f"evaluate.adversaries must be a list of column specs (strings such as "
+                f"'attacks', 'attack:mad', 'preset:NAME'), got {self.adversaries!r}."
+            )
+        if self.threat is not None and not isinstance(self.threat, str):
+            raise ConfigError(f"evaluate.threat must be a preset name, got {self.threat!r}.")
+        try:
+            check_columns(
+                self.scenario, self.adversaries, self.threat, attacked=self.exploitability > 0
+            )
+        except ConfigError as exc:
+            raise ConfigError(f"[evaluate]: {exc}") from None
+
+    def base_method(self, method: str) -> str:
+        """The `advgame.training.METHODS` name `method` trains with (itself, or its variant's)."""
+        return str(self.per_method.get(method, {}).get("method", method))
+
+    def runs(self) -> list[str]:
+        """Run names, ``METHOD-sSEED``, method by method."""
+        return [f"{m}-s{s}" for m in self.methods for s in self.seeds]
+
+    def method_runs(self, method: str) -> list[str]:
+        """The runs of one method (``atla`` is not ``atla-sa``)."""
+        return [r for r in self.runs() if r.rpartition("-s")[0] == method]
+
+    def config(self, run: str) -> Any:
+        """The `TrainConfig` of run ``METHOD-sSEED``."""
+        from advgame.training import METHODS, TrainConfig
+
+        method, _, seed = run.rpartition("-s")
+        own = {k: v for k, v in self.per_method.get(method, {}).items() if k != "method"}
+        fields = {**METHODS[self.base_method(method)], **self.train, **own}
+        try:
+            return TrainConfig(scenario=self.scenario, seed=int(seed), **fields)
+        except TypeError as exc:
+            raise ConfigError(
+                f"Run {run}: a [train] key is not a TrainConfig field ({exc})."
+            ) from None
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    """Read a campaign file (TOML; see the module doc)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"No campaign file at {path}.") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"The campaign file {path} is not valid TOML: {exc}.") from None
+    known = {"scenario", "methods", "seeds", "train", "evaluate"}
+    if set(data) - known:
+        raise ConfigError(f"{path}: unknown keys {sorted(set(data) - known)}; use {sorted(known)}.")
+    train = dict(data.get("train", {}))
+    methods = tuple(data.get("methods", ()))
+    per_method = {
+        m: train.pop(m) for m in list(train) if isinstance(train[m], dict) and m in methods
+    }
+    ev = dict(data.get("evaluate", {}))
+    unknown = set(ev) - {"adversaries", "threat", "seeds", "exploitability", "cost_limit"}
+    if unknown:
+        raise ConfigError(f"{path}: unknown [evaluate] keys {sorted(unknown)}.")
+    return Campaign(
+        scenario=str(data.get("scenario", "")),
+        methods=methods,
+        seeds=tuple(data.get("seeds", (0,))),
+        train=train,
+        per_method=per_method,
+        adversaries=_specs(ev.get("adversaries", ("attacks",))),
+        threat=ev.get("threat"),
+        eval_seeds=ev.get("seeds", 5),
+        exploitability=ev.get("exploitability", 0),
+        cost_limit=ev.get("cost_limit"),
+    )
+
+
+def _specs(value: Any) -> Any:
+    """A list of column specs as a tuple (anything else is left for the check to refuse)."""
+    return tuple(value) if isinstance(value, list | tuple) else value
