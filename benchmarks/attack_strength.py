@@ -13,6 +13,16 @@ Results: ``<out>/results.json`` and ``<out>/attacks.md`` (mean ± 95 % Student-t
 seed means). Run: ``python benchmarks/attack_strength.py --seeds 3 --steps 20480 --out
 docs/attacks/hopper`` (about 25 minutes on 2 busy cores); for a task without ATLA's budgets,
 name the threat model, e.g. ``--scenario InvertedPendulum-v5 --preset obs-normalized-0.1``.
+
+``--zoo ID`` measures the searched optimal attack against an outside yardstick instead (issue
+36): on the released agent ID, side by side in one run, advgame's search (`OptimalSearch`:
+``--grid`` entries of `OPTIMAL_GRID`, ``--br-steps`` each, selected on ``--select-seeds``) and
+a plain SB3 PPO adversary written without advgame (`outside_adversary.py`, ``--br-steps`` as
+well); both are then played in one advgame table (``--episodes`` seeds, both sides
+deterministic) beside nominal, and the outside adversary once more in its own env as a check
+that advgame plays it as written. ``<out>/strength.md`` holds the table with the machine's
+calibration; e.g. ``python benchmarks/attack_strength.py --zoo hopper/ppo --br-steps 200000
+--grid 4,5,6,7 --episodes 10 --out docs/attacks/strength-hopper``.
 """
 
 from __future__ import annotations
@@ -134,8 +144,90 @@ def _markdown(rows: list[dict[str, float]], args: argparse.Namespace) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _outside(args: argparse.Namespace, victim: Any, eps: float) -> dict[str, Any]:
+    """Train the outside adversary (no advgame in its code) and play it in its own env."""
+    import outside_adversary
+
+    seeds = list(range(20_000, 20_000 + args.episodes))
+    start = time.perf_counter()
+    files = outside_adversary.train(args.scenario, victim.path, victim.normalizer, eps,
+                                    args.br_steps, 0, Path(args.out) / "outside")  # fmt: skip
+    took = time.perf_counter() - start
+    own = outside_adversary.evaluate(
+        args.scenario, victim.path, victim.normalizer, eps, files, seeds
+    )
+    return {"files": files, "own_returns": own, "train_s": took}
+
+
+def _strength(args: argparse.Namespace) -> None:
+    """Issue 36: advgame's searched optimal attack beside an outside SB3 adversary, one table."""
+    from calibrate import step_us
+
+    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.core.registry import scenario_spec
+    from advgame.evaluation import AdversarySetup, evaluate, population_jobs
+    from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch, optimal_jobs
+    from advgame.evaluation.table.threat import observation_agent
+    from advgame.workflows import zoo
+
+    entry, victim = zoo.entry(args.zoo), zoo.load(args.zoo)
+    args.scenario, args.preset = entry.scenario, entry.threat
+    agent = observation_agent(args.scenario, args.preset)
+    (disruptor,) = [d for d in scenario_spec(args.scenario).load_presets()[args.preset].disruptors
+                    if d.agent == agent]  # fmt: skip
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    before = f"{step_us(repeats=3):.1f} µs per raw HalfCheetah-v5 step"
+    grid = tuple(OPTIMAL_GRID[int(k)] for k in args.grid.split(",")) if args.grid else OPTIMAL_GRID
+    search = OptimalSearch(steps=args.br_steps, grid=grid, select_seeds=args.select_seeds,
+                           workers=max(args.workers - 1, 1))  # fmt: skip
+    seeds = list(range(20_000, 20_000 + args.episodes))
+    with ProcessPoolExecutor(1, mp_context=get_context("forkserver")) as pool:
+        outside = pool.submit(_outside, args, victim, float(disruptor.eps))  # one core
+        start = time.perf_counter()
+        jobs = optimal_jobs(args.scenario, args.preset, agent, {args.zoo: victim}, search, out,
+                            seeds=seeds)  # fmt: skip
+        search_s = time.perf_counter() - start
+        outer = outside.result()
+    files = outer["files"]
+    columns = {
+        "nominal": AdversarySetup.nominal(),
+        "outside SB3 adversary": AdversarySetup(
+            {"preset": args.preset},
+            {agent: SB3Checkpoint(files["path"], "ppo", files["normalizer"], deterministic=True)},
+        ),
+    }
+    jobs += population_jobs(args.scenario, {args.zoo: victim}, columns, seeds=seeds)
+    table = evaluate(jobs, workers=args.workers, progress=False)
+    means = {c: float(np.mean(table.values(args.zoo, c))) for c in table.adversaries}
+    nominal = means["nominal"]
+    lines = [
+        f"# The searched optimal attack beside an outside adversary: {args.zoo}",
+        "",
+        f"`python benchmarks/attack_strength.py --zoo {args.zoo} --br-steps {args.br_steps} "
+        f"--grid {args.grid or 'all'} --select-seeds {args.select_seeds} --episodes "
+        f"{args.episodes}`; {args.scenario}, threat model `{args.preset}` (eps {disruptor.eps}, "
+        f"normalized units); calibration {before} before, {step_us(repeats=3):.1f} µs after. Mean true "
+        f"return over {args.episodes} seeds, both sides deterministic.",
+        "",
+        "| column | return | of nominal |",
+        "|---|---|---|",
+        *[f"| {c} | {m:,.0f} | {100 * m / nominal:.0f} % |" for c, m in means.items()],
+        "",
+        f"The outside adversary in its own env (no advgame): {np.mean(outer['own_returns']):,.0f}"
+        f". Wall time: the search {search_s / 60:.1f} min ({len(grid)} candidates on "
+        f"{search.workers} worker(s)), the outside adversary {outer['train_s'] / 60:.1f} min on "
+        "one core, beside each other.",
+    ]
+    (out / "strength.md").write_text("\n".join(lines) + "\n")
+    print((out / "strength.md").read_text())
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--zoo", help="measure the searched optimal attack on this zoo agent")
+    parser.add_argument("--grid", help="--zoo: OPTIMAL_GRID indices to search, e.g. 4,5 (all)")
+    parser.add_argument("--select-seeds", type=int, default=10, help="--zoo: selection seeds")
     parser.add_argument("--scenario", default="Hopper-v5")
     parser.add_argument("--preset", default="atla", help="the one threat model of the table")
     parser.add_argument("--seeds", type=int, default=3)
@@ -145,6 +237,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default="docs/attacks")
     args = parser.parse_args()
+    if args.zoo:
+        _strength(args)
+        return
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     with ProcessPoolExecutor(args.workers, mp_context=get_context("forkserver")) as pool:

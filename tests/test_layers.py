@@ -254,7 +254,7 @@ def test_a_committed_campaign_finds_its_part_files_by_the_keys_of_its_units(
     opponents = {a: MixtureSpec((spec,), (1.0,)) for a in game.protagonists}
     game.close()
     agent = observation_agent("Hopper-v5", "atla")
-    for k, hparams in enumerate(OPTIMAL_GRID):
+    for k, hparams in enumerate(OPTIMAL_GRID[:4]):  # the entries that campaign searched
         unit = BestResponseJob(
             name=f"ppo-s0/{k}", scenario="Hopper-v5", make_kwargs={"preset": "atla"},
             agent=agent, hparams=dict(hparams), opponents=opponents, steps=200_000, seed=k,

@@ -22,6 +22,20 @@ def test_a_checkpoint_gets_its_strongest_searched_adversary(
     assert main([*args, "--checkpoint", f"ppo={pendulum_ppo}:ppo", "--raw-obs", "ppo"]) == 0
     search = json.loads((out / "optimal.json").read_text())["ppo"]
     assert len(search["candidates"]) == len(OPTIMAL_GRID)
+    assert [c["hparams"] for c in search["candidates"]] == [dict(g) for g in OPTIMAL_GRID]
+    # the search's own keys reach the trainer: 4 views for the SB3 recipe, 5x the steps for the
+    # long candidate; the others train one view for --exploitability steps
+    from stable_baselines3 import PPO
+
+    def trained(k: int) -> tuple[int, int]:
+        (zip_path,) = (out / "optimal" / "ppo" / str(k)).glob("*.zip")
+        model = PPO.load(zip_path, device="cpu")
+        return model.n_envs, model.num_timesteps
+
+    long_k = next(k for k, g in enumerate(OPTIMAL_GRID) if g.get("steps_scale", 1) > 1)
+    assert trained(0) == (1, 2048)  # one rollout of n_steps 2048 covers 256 steps
+    assert trained(long_k)[0] == 4
+
     kept = [c for c in search["candidates"] if c["kept"]]
     assert len(kept) == 1
     assert kept[0]["selection_return"] == min(c["selection_return"] for c in search["candidates"])
@@ -39,6 +53,31 @@ def test_a_checkpoint_gets_its_strongest_searched_adversary(
     stamps = [p.stat().st_mtime_ns for p in parts]
     assert main([*args, "--checkpoint", f"ppo={pendulum_ppo}:ppo", "--raw-obs", "ppo"]) == 0
     assert [p.stat().st_mtime_ns for p in sorted((out / "optimal" / "parts").iterdir())] == stamps
+
+
+def test_the_long_candidate_trains_first_with_its_scaled_budget(
+    pendulum_ppo: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.evaluation.attacks.optimal import _search
+    from advgame.evaluation.table.threat import default_threat, observation_agent
+
+    units: list = []
+
+    def capture(fn: object, jobs: list, **kwargs: object) -> None:
+        units.extend(jobs)
+        raise RuntimeError("captured")
+
+    monkeypatch.setattr("advgame.runner.run.run_units", capture)
+    threat = default_threat("InvertedPendulum-v5")
+    agent = observation_agent("InvertedPendulum-v5", threat)
+    victim = {"ppo": SB3Checkpoint(str(pendulum_ppo), "ppo", None)}
+    with pytest.raises(RuntimeError, match="captured"):
+        _search("InvertedPendulum-v5", threat, agent, victim, OptimalSearch(steps=1000), tmp_path)
+    scales = [g.get("steps_scale", 1) for g in OPTIMAL_GRID]
+    assert [u.steps for u in units] == sorted((1000 * s for s in scales), reverse=True)
+    assert units[0].hparams["n_envs"] == 4 and "steps_scale" not in units[0].hparams
+    assert units[0].name == f"ppo/{scales.index(max(scales))}"  # its index, not its position
 
 
 @pytest.mark.parametrize(

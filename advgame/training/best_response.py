@@ -105,7 +105,8 @@ class BestResponseJob:
     algo: str = "ppo"
     """Its learner (`advgame.training.learner_config`)."""
     hparams: Mapping[str, Any] | None = None
-    """Learner config overrides."""
+    """Learner config overrides; ``n_envs`` (views trained on at once, default 1) is read here
+    and not passed to the learner."""
     opponents: Mapping[str, MixtureSpec]
     """``{agent id: mixture}`` of the agents it plays against."""
     steps: int
@@ -146,9 +147,13 @@ def train_best_response(job: BestResponseJob) -> dict[str, Any]:
     from advgame.training.config import learner_config
 
     torch.set_num_threads(1)
-    learner = learner_config(job.algo, dict(job.hparams or {}))
+    hparams = dict(job.hparams or {})
+    n_envs = hparams.pop("n_envs", 1)
+    if type(n_envs) is not int or n_envs < 1:
+        raise ConfigError(f"Best response {job.name}: n_envs must be an int >= 1, got {n_envs!r}.")
+    learner = learner_config(job.algo, hparams)
     kwargs = {**job.make_kwargs, "phase": "train"}
-    fns = [view_factory(job.scenario, job.agent, dict(job.opponents), **kwargs)]
+    fns = [view_factory(job.scenario, job.agent, dict(job.opponents), **kwargs)] * n_envs
     targets = _normalized_targets(job)
     side = Side(job.agent, learner, fns, job.seed, job.steps, normalize=job.normalize)
     try:

@@ -28,6 +28,7 @@ from advgame.evaluation.table.payoff import NOMINAL, PayoffTable
 __all__ = [
     "OPTIMAL",
     "OPTIMAL_GRID",
+    "SB3_RECIPE",
     "OptimalSearch",
     "optimal_jobs",
     "released_jobs",
@@ -38,14 +39,38 @@ log = logging.getLogger(__name__)
 
 OPTIMAL = "attack optimal"
 """The column name of the searched learned attack."""
+SB3_RECIPE: dict[str, Any] = {
+    "n_envs": 4, "n_steps": 512, "batch_size": 64, "learning_rate": 3e-4,
+    "lr_decay": False, "ent_coef": 0.0, "vf_coef": 0.5,
+}  # fmt: skip
+"""A plain SB3 PPO adversary (4 envs of 512 steps, constant learning rate, SB3's value weight):
+the outside recipe of issue 36, which took the released Hopper PPO agent to 18 % of nominal in
+200k steps where the first four entries of `OPTIMAL_GRID` reached 33 %."""
+
 OPTIMAL_GRID: tuple[dict[str, Any], ...] = (
     {"learning_rate": 3e-4, "ent_coef": 0.0},
     {"learning_rate": 1e-3, "ent_coef": 0.0},
     {"learning_rate": 3e-4, "ent_coef": 0.01},
     {"learning_rate": 1e-3, "ent_coef": 0.01, "clip_range": 0.1},
+    {**SB3_RECIPE, "steps_scale": 5},
+    SB3_RECIPE,
+    {**SB3_RECIPE, "learning_rate": 1e-3},
+    {"learning_rate": 3e-3, "ent_coef": 0.0, "clip_range": 0.4, "vf_coef": 0.5},
 )
-"""PPO settings of the adversary tried per protagonist (learning rate, entropy bonus, clip):
-ATLA searches the optimal attack's learning rate and entropy; this is a small such grid."""
+"""The adversaries tried per protagonist; the strongest on the selection seeds is kept.
+
+Each entry is PPO overrides (`advgame.agents.PPOConfig` fields) plus two keys of the search:
+``n_envs`` (views trained on at once, default 1) and ``steps_scale`` (this candidate trains
+``steps_scale`` times the search's steps, default 1). Entries 0-3 are the first grid (learning
+rate, entropy bonus, clip; annealed learning rate); 4-6 the outside SB3 recipe (`SB3_RECIPE`),
+once five times as long (ATLA trains each attack about 1M steps), once as long as the rest and
+once at ATLA's middle learning rate; 7 ATLA's high-learning-rate, wide-clip corner (its
+Hopper scan, ``configs/attack_ppo_hopper_scan.py`` of ATLA's code). Entries keep their index
+(a candidate's part file is named by its index and settings), so new ones go at the end; the
+long candidate trains first (strongest first: a search cut short still has it)."""
+
+SEARCH_KEYS = ("n_envs", "steps_scale")
+"""Grid keys read by the search, not by the learner config."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -56,8 +81,9 @@ class OptimalSearch:
     """Environment steps each candidate adversary trains."""
     grid: tuple[Mapping[str, Any], ...] = OPTIMAL_GRID
     """PPO overrides, one candidate per entry."""
-    select_seeds: int = 2
-    """Evaluation seeds on which the candidates are compared (disjoint from the table's)."""
+    select_seeds: int = 10
+    """Evaluation seeds on which the candidates are compared (disjoint from the table's); few
+    seeds make the argmin a winner's curse (candidates of one agent span 1,115-2,117 on 2)."""
     seed: int = 0
     """Seeds the candidates' training."""
     workers: int = 1
@@ -70,6 +96,13 @@ class OptimalSearch:
             raise ConfigError(f"OptimalSearch.steps must be an int >= 1, got {self.steps!r}.")
         if not self.grid or not all(isinstance(g, Mapping) for g in self.grid):
             raise ConfigError(f"OptimalSearch.grid must be PPO override dicts, got {self.grid!r}.")
+        for g in self.grid:
+            for key in SEARCH_KEYS:
+                value = g.get(key, 1)
+                if type(value) is not int or value < 1:
+                    raise ConfigError(
+                        f"OptimalSearch.grid entry {dict(g)!r}: {key} must be an int >= 1."
+                    )
         if type(self.select_seeds) is not int or self.select_seeds < 1:
             raise ConfigError(
                 f"OptimalSearch.select_seeds must be an int >= 1, got {self.select_seeds!r}."
@@ -170,34 +203,36 @@ def _search(
     for name, spec in protagonists.items():
         specs = dict(spec) if isinstance(spec, Mapping) else dict.fromkeys(ids, spec)
         opponents = {a: MixtureSpec((s,), (1.0,)) for a, s in specs.items()}
-        for k, hparams in enumerate(search.grid):
+        for k, entry in enumerate(search.grid):
+            hparams = {key: v for key, v in entry.items() if key != "steps_scale"}
             units.append(
                 BestResponseJob(
                     name=f"{name}/{k}", scenario=scenario, make_kwargs={"preset": threat},
-                    agent=agent, hparams=dict(hparams), opponents=opponents,
-                    steps=search.steps, seed=search.seed + k,
+                    agent=agent, hparams=hparams, opponents=opponents,
+                    steps=search.steps * int(entry.get("steps_scale", 1)), seed=search.seed + k,
                 )
             )  # fmt: skip
             where.append((name, k))
+    order = sorted(range(len(units)), key=lambda i: -units[i].steps)  # the long ones first
+    units, where = [units[i] for i in order], [where[i] for i in order]
     kind = search.executor or _DEFAULT_EXECUTOR[0]
     log.info("optimal attack: %d candidates of %d steps", len(units), search.steps)
     records = run_units(train_best_response, units, executor=kind, workers=search.workers,
                         parts_dir=out / "optimal" / "parts")  # fmt: skip
-    cands: dict[str, list[Any]] = {}
+    by_index: dict[str, dict[int, Any]] = {}
     for (name, k), rec in zip(where, records, strict=True):
         folder = out / "optimal" / name / str(k)
         folder.mkdir(parents=True, exist_ok=True)
         for fname, data in rec.value["files"].items():
             (folder / fname).write_bytes(data)
         norm = rec.value["normalizer"]
-        cands.setdefault(name, []).append(
-            SB3Checkpoint(
-                str(folder / rec.value["model"]),
-                rec.value["algo"],
-                str(folder / norm) if norm else None,
-                deterministic=True,
-            )
+        by_index.setdefault(name, {})[k] = SB3Checkpoint(
+            str(folder / rec.value["model"]),
+            rec.value["algo"],
+            str(folder / norm) if norm else None,
+            deterministic=True,
         )
+    cands = {name: [ks[k] for k in sorted(ks)] for name, ks in by_index.items()}
     select = tuple(range(10_000, 10_000 + search.select_seeds))  # apart from the table's seeds
     jobs = [
         EvalJob(scenario=scenario, make_kwargs={"preset": threat}, protagonist=name,
