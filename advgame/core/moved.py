@@ -3,10 +3,12 @@
 advgame writes class paths into files: part files of campaigns are pickles, populations store a
 spec's ``"module:qualname"``, and a part file is named by the digest of its unit's pickle, which
 spells the module of every class in the unit. When a module moves, `MOVED` maps its old name to
-its new one, and three readers go through this module:
+its new one (`MOVED_NAMES` does the same for a single class), and the readers and the one
+writer of such names go through this module:
 
-* `current` (used by `advgame.core.registry.load` for ``"module:attr"`` names and by
-  `Unpickler` for pickles) turns an old name into the module that holds the class now;
+* `current` turns an old name into the one that holds the class now: for ``"module:attr"``
+  names (`advgame.core.registry.load`) and for pickles (`Unpickler`, `load_pickle`: part
+  files);
 * `stable_pickle` writes a value as it would have been pickled before every move (old module
   names), so a unit's digest, and with it the name of its part file, does not change when the
   code is reorganised.
