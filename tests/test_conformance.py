@@ -1,6 +1,7 @@
 """Conformance of every registered scenario and preset, straight from the registry.
 
-For each (scenario id, preset) pair the registry offers:
+For each (scenario id, preset) pair the registry offers (the default suite runs a covering set,
+`DEFAULT_RUN`: every scenario and every preset at least once; ``-m slow`` runs every pair):
 
 * PettingZoo's own `parallel_api_test` and `parallel_seed_test`, with every warning an error;
 * the project's game checks: spaces are cached objects, adversaries have `Box` action spaces,
@@ -37,8 +38,35 @@ def _needs_extra(sid: str) -> pytest.MarkDecorator:
     return pytest.mark.skipif(bool(spec.missing()), reason=reason)
 
 
+def _default_run() -> set[tuple[str, str]]:
+    """The (scenario, preset) cases of the default suite; every other pair runs under ``-m slow``.
+
+    Each scenario with its ``full`` preset (every disruptor kind its family has, on that task),
+    and each preset name of a family once, on the family's scenarios in turn: every scenario and
+    every disruptor set-up goes through all four checks by default, the cross product nightly.
+    """
+    families: dict[str, list[str]] = {}
+    for sid in advgame.list_scenarios():
+        families.setdefault(scenario_spec(sid).family, []).append(sid)
+    chosen = set()
+    for sids in families.values():
+        presets = {sid: scenario_spec(sid).load_presets() for sid in sids}
+        chosen |= {(sid, "full" if "full" in presets[sid] else "default") for sid in sids}
+        for j, name in enumerate(sorted({n for p in presets.values() for n in p})):
+            if not any((sid, name) in chosen for sid in sids):
+                turn = sids[j % len(sids) :] + sids[: j % len(sids)]
+                chosen.add((next(sid for sid in turn if name in presets[sid]), name))
+    return chosen
+
+
+DEFAULT_RUN = _default_run()
 CASES = [
-    pytest.param(sid, name, id=f"{sid}:{name}", marks=_needs_extra(sid))
+    pytest.param(
+        sid,
+        name,
+        id=f"{sid}:{name}",
+        marks=[_needs_extra(sid)] + ([] if (sid, name) in DEFAULT_RUN else [pytest.mark.slow]),
+    )
     for sid in advgame.list_scenarios()
     for name in scenario_spec(sid).load_presets()
 ]

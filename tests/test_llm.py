@@ -58,7 +58,9 @@ class Scripted:
                 pass
 
         self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+        # a short poll: `shutdown` waits for it (the default 0.5 s, at every test's teardown)
+        serve = {"poll_interval": 0.01}
+        threading.Thread(target=self.server.serve_forever, kwargs=serve, daemon=True).start()
         self.url = f"http://127.0.0.1:{self.server.server_address[1]}/v1"
 
     def endpoint(self, **kw: Any) -> OpenAIEndpoint:

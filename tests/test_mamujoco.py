@@ -87,6 +87,9 @@ def test_failing_variants_still_fail_with_the_recorded_error(sid: str) -> None:
 
 
 # -- PettingZoo conformance, every registered scenario x preset ------------------------------------
+# Slow: tests/test_conformance.py runs these two checks (with more cycles) on the same registered
+# scenarios, each with its ``full`` preset and each preset once in the default suite.
+@pytest.mark.slow
 @pytest.mark.parametrize(("sid", "preset"), CASES)
 def test_pettingzoo_parallel_api(sid: str, preset: str) -> None:
     game = advgame.make(sid, preset=preset)
@@ -98,6 +101,7 @@ def test_pettingzoo_parallel_api(sid: str, preset: str) -> None:
         game.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("sid", "preset"), CASES)
 def test_pettingzoo_parallel_seed(sid: str, preset: str) -> None:
     with warnings.catch_warnings():

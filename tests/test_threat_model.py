@@ -32,8 +32,16 @@ def two_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
 @pytest.mark.usefixtures("one_torch_thread")
 def test_every_row_faces_one_threat_model_and_the_worst_attack_is_named(
-    two_runs: tuple[Path, Path], tmp_path: Path
+    two_runs: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    from functools import partial
+
+    from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch
+    from advgame.workflows import suite
+
+    # Budget: the optimal attack searches one candidate, not the whole grid (each trains a
+    # 2048-step rollout whatever --exploitability says); tests/test_optimal.py searches the grid.
+    monkeypatch.setattr(suite, "OptimalSearch", partial(OptimalSearch, grid=OPTIMAL_GRID[:1]))
     ppo, atla = two_runs
     assert json.loads((ppo / "config.json").read_text())["preset"] != "atla"  # unlike trainings
     out = tmp_path / "results"
