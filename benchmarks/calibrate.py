@@ -7,8 +7,10 @@ a day when this prints about 35 µs.
 
 Steps ``gymnasium.make("HalfCheetah-v5")`` (its default wrappers) with seeded uniform random
 actions drawn before timing, resetting at episode ends; after a warm-up, ``--repeats`` runs of
-``--steps`` steps each, and reports the median of their per-step means. It needs Gymnasium's
-MuJoCo tasks only, not advgame, so that a half-moved checkout still calibrates.
+``--steps`` steps each, and reports the median of their per-step means, with the one-minute
+load average when it started: the step time is one core's speed, so other jobs competing for
+the cores (which slow a suite run on every core) show in the load, not in the µs. It needs
+Gymnasium's MuJoCo tasks only, not advgame, so that a half-moved checkout still calibrates.
 Run: ``python benchmarks/calibrate.py`` (``--steps``, ``--repeats``, ``--json``).
 """
 
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import time
 from typing import cast
@@ -49,9 +52,12 @@ def _run(env: gym.Env, actions: np.ndarray) -> float:
     return time.perf_counter() - start
 
 
-def line(us: float, steps: int, repeats: int) -> str:
-    """The one line that reports a calibration."""
-    return f"calibration: {ENV_ID} raw step {us:.1f} µs (median of {repeats} × {steps:,} steps)"
+def line(us: float, steps: int, repeats: int, load: float | None = None) -> str:
+    """The one line that reports a calibration (and the load average it started at)."""
+    busy = "" if load is None else f"; load {load:.1f} on {os.cpu_count()} cores"
+    return (
+        f"calibration: {ENV_ID} raw step {us:.1f} µs (median of {repeats} × {steps:,} steps{busy})"
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -60,12 +66,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=5, help="timed repeats (median reported)")
     parser.add_argument("--json", action="store_true", help="one JSON object instead of a line")
     args = parser.parse_args(argv)
+    load = os.getloadavg()[0]
     us = step_us(args.steps, args.repeats)
     if args.json:
         record = {"env": ENV_ID, "step_us": round(us, 2), "steps": args.steps}
-        print(json.dumps({**record, "repeats": args.repeats}))
+        print(json.dumps({**record, "repeats": args.repeats, "load": round(load, 2)}))
     else:
-        print(line(us, args.steps, args.repeats))
+        print(line(us, args.steps, args.repeats, load))
 
 
 if __name__ == "__main__":

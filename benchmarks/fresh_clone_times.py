@@ -51,8 +51,9 @@ def steps(command: str) -> list[tuple[str, str]]:
 
 def calibration(steps_per_repeat: int, repeats: int = 5) -> float:
     """µs per raw HalfCheetah-v5 step now; printed as `calibrate.py` prints it."""
+    load = os.getloadavg()[0]
     us = step_us(steps_per_repeat, repeats)
-    print(line(us, steps_per_repeat, repeats), flush=True)
+    print(line(us, steps_per_repeat, repeats, load), flush=True)
     return us
 
 
