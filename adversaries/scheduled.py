@@ -48,14 +48,26 @@ class _Sinusoid:
         amp: np.ndarray,
         freq: np.ndarray,
         phase: np.ndarray,
+        start: int = 0,
     ) -> None:
         self.info, self.base, self.amp, self.freq, self.phase = info, base, amp, freq, phase
-        self.episode = -1
+        self.episode = start - 1
+        self._next: int | None = None
         self.action = info.encode(base)
 
+    def set_episode_index(self, index: int) -> None:
+        """Make the next `reset` start episode ``i = index`` instead of the next of its count.
+
+        Evaluation tables call it (`advgame.core.episodes.reseed_policies`), so that each
+        evaluation episode plays a declared episode of the schedule whatever policy object or
+        worker plays it; later resets count on from there.
+        """
+        self._next = int(index)
+
     def reset(self, seed: int | None = None) -> None:
-        """Advance to the next episode index ``i``."""
-        self.episode += 1
+        """Advance to the next episode index ``i`` (or the one `set_episode_index` gave)."""
+        self.episode = self.episode + 1 if self._next is None else self._next
+        self._next = None
         value = self.base + self.amp * np.sin(self.freq * self.episode + self.phase)
         self.action = self.info.encode(value)
 
@@ -68,9 +80,11 @@ class _Sinusoid:
 class SinusoidAdversary:
     """A shift that moves sinusoidally from episode to episode: ``base + A·sin(ω·i + φ)``.
 
-    ``i`` counts the episodes the policy has played (its resets, from 0). The appendix's Ant
-    and Humanoid schedule is ``SinusoidAdversary(base=(14.715, 1.0), amplitude=(4.905, 0.2),
-    frequency=0.5)`` on (gravity, wind).
+    ``i`` counts the episodes the policy has played (its resets, from `start`). The
+    appendix's Ant and Humanoid schedule is ``SinusoidAdversary(base=(14.715, 1.0),
+    amplitude=(4.905, 0.2), frequency=0.5)`` on (gravity, wind). An evaluation table does not
+    rely on the count: its episode ``k`` of a job (seed ``s``, episode ``e`` of ``E`` per seed:
+    ``k = s·E + e``) plays ``i = k + 1`` (`advgame.evaluation.table.jobs.schedule_index`).
 
     Example:
         >>> import advgame
@@ -90,6 +104,8 @@ class SinusoidAdversary:
     """Angular frequency per episode index."""
     phase: float | Sequence[float] = 0.0
     """Phase offset."""
+    start: int = 0
+    """The index ``i`` of the policy's first episode (OMPO's training loop counts from 1)."""
 
     def build(self, info: AgentInfo) -> Policy:
         """A policy that advances one episode per reset."""
@@ -100,4 +116,7 @@ class SinusoidAdversary:
             if arr.ndim > 1 or (arr.ndim == 1 and arr.size != n) or not np.isfinite(arr).all():
                 raise ConfigError(f"SinusoidAdversary.{name} must be finite, scalar or {n} values.")
             vals.append(np.broadcast_to(arr, (n,)).copy())
-        return _Sinusoid(info, *vals)
+        if type(self.start) is not int or self.start < 0:
+            raise ConfigError(f"SinusoidAdversary.start must be an int >= 0, got {self.start!r}.")
+        base, amp, freq, phase = vals
+        return _Sinusoid(info, base, amp, freq, phase, start=self.start)

@@ -23,7 +23,7 @@ from advgame.errors import ConfigError, FileFormatError
 
 __all__ = ["ALGOS", "Normalizer", "SB3Checkpoint", "SB3Policy", "load_model", "load_normalizer"]
 
-ALGOS = ("ppo", "sac", "td3")
+ALGOS = ("ppo", "sac", "td3", "ompo")
 CHECKPOINT_FIX = (
     "Save it again from the model (or rerun the training iteration that wrote it); a copy "
     "cut short in transfer loads once copied whole."
@@ -35,6 +35,10 @@ def _algo_class(algo: str) -> Any:
     import stable_baselines3 as sb3
 
     classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}
+    if algo == "ompo":
+        from advgame.agents.ompo import OMPO
+
+        return OMPO
     if algo not in classes:
         raise ConfigError(f"Unknown algorithm {algo!r}; expected one of {ALGOS}.")
     return classes[algo]

@@ -11,7 +11,13 @@ from typing import Any, ClassVar
 
 from advgame.errors import ConfigError
 
-__all__ = ["LEARNERS", "LinearDecay", "PPOConfig", "SACConfig", "SAPPOConfig", "TD3Config"]
+__all__ = [
+    "LinearDecay",
+    "PPOConfig",
+    "SACConfig",
+    "SAPPOConfig",
+    "TD3Config",
+]
 
 
 class LinearDecay:
@@ -313,12 +319,3 @@ class TD3Config(_OffPolicyConfig):
             action_noise=noise,
             **self._off_policy(seed, total_steps, tensorboard_log),
         )
-
-
-LEARNERS: dict[str, type] = {
-    "ppo": PPOConfig,
-    "sa-ppo": SAPPOConfig,
-    "sac": SACConfig,
-    "td3": TD3Config,
-}
-"""Learner configs by algorithm name."""

@@ -12,10 +12,24 @@ Presets of every MuJoCo scenario:
   normalized space with ATLA's budgets; ``obs-normalized-0.1`` the same attack with ε = 0.1 on
   every task.
 * ``shift-deterministic``/``shift-uniform``/``shift-sinusoid`` (Ant, Humanoid: gravity and
-  wind; Walker2d, Hopper: torso and foot lengths): the appendix's non-stationary settings.
-  The paper gives Walker2d lengths as capsule half-lengths (torso 0.2, foot 0.1) and Hopper's
-  as full lengths (0.4, 0.39); both are centred on the nominal model, so here both are
-  expressed as full lengths: Walker2d torso 0.4 ± 0.2, foot 0.2 ± 0.1 (both feet).
+  wind; Walker2d, Hopper: torso and foot lengths): the appendix's non-stationary settings as
+  this module first read them. Hopper's 0.4 and 0.39 are taken as *full* capsule lengths
+  centred on the nominal model (torso 0.4 ± 0.1, foot 0.39 ± 0.1) and Walker2d's half-lengths
+  are doubled to full ones (torso 0.4 ± 0.2, feet 0.2 ± 0.1); the ``length`` parameter
+  recompiles the model, so masses follow the lengths. Ant's and Humanoid's wind blows along +x
+  at speed 0.8-1.2 in air of density 1.2 (no viscosity), and the sinusoid's episode index
+  counts a policy's resets from 0. Results were measured with these presets, so they stay as
+  they are; OMPO's own tasks are the ``ompo-*`` presets below, which differ: OMPO's numbers are
+  half-lengths (Hopper's torso and foot 1.5-2.5 times nominal), its torso grows upward from the
+  hip with masses unchanged, its wind blows along -x (Humanoid's at 0.5-1.5) in air of
+  viscosity 0.00002, and its episode index starts at 1.
+* ``ompo-nonstationary``, ``ompo-low``, ``ompo-mid``, ``ompo-high`` (Hopper, Walker2d, Ant,
+  Humanoid): OMPO's non-stationary tasks from its authors' code, and fixed points of their
+  ranges (`advgame.scenarios.ompo`, docs/ompo.md).
+
+In an evaluation table, episode ``k`` of a job (seeds in order) plays episode ``k + 1`` of a
+per-episode schedule, whatever its preset (`advgame.evaluation.table.jobs.schedule_index`), so
+a ``shift-sinusoid`` or ``ompo-nonstationary`` column moves from seed to seed.
 """
 
 from __future__ import annotations
@@ -32,6 +46,7 @@ from advgame.disruptors import (
     RewardDisruptor,
 )
 from advgame.scenarios.common import gaussian_presets, make_task
+from advgame.scenarios.ompo import ompo_presets
 
 __all__ = ["ATLA_EPS", "FORCES", "dynamics_shift", "make_task", "presets"]
 
@@ -160,4 +175,5 @@ def presets(env_id: str) -> dict[str, Preset]:
         )
     if env_id in _SHIFTS:
         out.update(_shift_presets(env_id))
+    out.update(ompo_presets(env_id))
     return out

@@ -94,11 +94,21 @@ def build_policies(
     return out
 
 
-def reseed_policies(policies: Mapping[str, Policy], seed: int | None) -> None:
+def reseed_policies(
+    policies: Mapping[str, Policy], seed: int | None, index: int | None = None
+) -> None:
     """Reset every policy; with a `seed`, each gets its own stream derived from it (in order).
 
     The one rule rollouts and views share, so an episode seeded the same way plays the same.
+    With an episode `index`, a policy that follows a per-episode schedule (it has the optional
+    ``set_episode_index``, see `advgame.core.policy.Policy`) is first told to play episode
+    `index` of its schedule; without one (training views), it counts its own resets.
     """
+    if index is not None:
+        for p in policies.values():
+            seek = getattr(p, "set_episode_index", None)
+            if seek is not None:
+                seek(index)
     if seed is None:
         for p in policies.values():
             p.reset(None)
@@ -109,12 +119,18 @@ def reseed_policies(policies: Mapping[str, Policy], seed: int | None) -> None:
 
 
 def rollout(
-    game: Game, policies: Mapping[str, Any], seed: int | None = None, episodes: int = 1
+    game: Game,
+    policies: Mapping[str, Any],
+    seed: int | None = None,
+    episodes: int = 1,
+    first_index: int | None = None,
 ) -> list[EpisodeResult]:
     """Play `episodes` episodes; episode ``i`` resets with ``seed + i`` (if a seed is given).
 
     Each policy is reset with a seed derived from the episode seed, so a seeded rollout is
-    reproducible. Only agents in `game.next_movers` are asked to act (`Game.play`).
+    reproducible. Only agents in `game.next_movers` are asked to act (`Game.play`). With
+    `first_index`, episode ``i`` is episode ``first_index + i`` of every scheduled policy
+    (`reseed_policies`); without, scheduled policies count their own resets.
 
     A protagonist policy that exposes ``observation_std`` (an `SB3Checkpoint` trained behind
     a normalizer) sets the scale of normalized-space observation budgets (ATLA), so a budget
@@ -124,16 +140,21 @@ def rollout(
     results = []
     for i in range(episodes):
         ep_seed = None if seed is None else seed + i
-        results += rollout_batch([game], [pols], [ep_seed])
+        index = None if first_index is None else first_index + i
+        results += rollout_batch([game], [pols], [ep_seed], [index])
     return results
 
 
 def rollout_batch(
-    games: Sequence[Game], policies: Sequence[Mapping[str, Policy]], seeds: Sequence[int | None]
+    games: Sequence[Game],
+    policies: Sequence[Mapping[str, Policy]],
+    seeds: Sequence[int | None],
+    indices: Sequence[int | None] | None = None,
 ) -> list[EpisodeResult]:
     """Play one episode in each of `games` in lockstep, each the one `rollout` plays alone.
 
-    Game ``k`` plays ``policies[k]`` and resets with ``seeds[k]``. `policies` are built
+    Game ``k`` plays ``policies[k]`` and resets with ``seeds[k]``; with `indices`, it is
+    episode ``indices[k]`` of its scheduled policies (`reseed_policies`). `policies` are built
     policies (`build_policies`), one dict per game, reseeded here. Alike games (one scenario
     and disruptor set-up) make each move together (`advgame.core.lockstep.play_all`). Before
     each move, the policies of every game in which agent ``a`` moves are asked at once
@@ -147,8 +168,9 @@ def rollout_batch(
             if std is not None:
                 game.set_observation_scale(agent, std)
     results = []
-    for game, pols, seed in zip(games, policies, seeds, strict=True):
-        reseed_policies(pols, seed)
+    order: Sequence[int | None] = [None] * len(games) if indices is None else indices
+    for game, pols, seed, index in zip(games, policies, seeds, order, strict=True):
+        reseed_policies(pols, seed, index)
         game.reset(seed=seed)
         results.append(EpisodeResult(clipped=dict.fromkeys(game.adversaries, 0)))
     keys = [_batch_keys(pols) for pols in policies]

@@ -49,6 +49,10 @@ class Policy(Protocol):
 # A policy may also offer ``act_batch(observations[n, ...]) -> actions[n, ...]`` with a
 # ``batch_key`` property: policies with equal non-None keys (e.g. N views' copies of one frozen
 # network) are then served by one `act_batch` call (see `act_batch` below). Both are optional.
+# A policy that follows a per-episode schedule (a sinusoidal shift) may offer
+# ``set_episode_index(index)``: its next `reset` then starts episode `index` of its schedule
+# instead of the next of its own count (evaluation tables declare which episode each of their
+# episodes plays; `advgame.core.episodes.reseed_policies`). Optional too.
 
 
 @runtime_checkable

@@ -4,8 +4,11 @@ Each `Param` is one adversary action dimension, mapped linearly from ``[-1, 1]``
 interval ``[low, high]`` (absolute units, or factors of the nominal value if ``relative``).
 Nominal values are snapshotted when the game is built and written back on every reset (MuJoCo
 keeps model edits across ``env.reset()``) unless the schedule says the shift persists.
-Body lengths change the capsule's half-length in an `mujoco.MjSpec` and recompile the model,
-so mass, inertia and contacts all follow; editing collision geometry alone would change nothing.
+Body lengths come in two kinds. ``length`` changes the capsule's half-length in an
+`mujoco.MjSpec` and recompiles the model, so mass, inertia and contacts all follow.
+``capsule`` is OMPO's shape change: the half-length (and, with ``anchor="base"``, the body's
+position) written into the live model with masses and inertias left nominal, and the collision
+bounds updated so contacts follow the shape (`advgame.disruptors.capsule`).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import numpy as np
 
 from advgame.core.disruptor import Disruptor, DisruptorSpec
 from advgame.core.fields import check_fields
+from advgame.disruptors.capsule import CapsuleEdit
 from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_mean
 
 if TYPE_CHECKING:
@@ -25,11 +29,12 @@ if TYPE_CHECKING:
 
 __all__ = ["DynamicsDisruptor", "DynamicsRuntime", "Param"]
 
-KINDS = ("mass", "gravity", "wind", "friction", "damping", "gear", "length")
+KINDS = ("mass", "gravity", "wind", "friction", "damping", "gear", "length", "capsule")
 # Which model object each kind names in `Param.names` (None: a global option, no names).
 NAMED = {
     "mass": "body",
     "length": "body",
+    "capsule": "body",
     "friction": "geom",
     "damping": "joint",
     "gear": "actuator",
@@ -48,10 +53,11 @@ class Param:
 
     """
 
-    kind: Literal["mass", "gravity", "wind", "friction", "damping", "gear", "length"]
+    kind: Literal["mass", "gravity", "wind", "friction", "damping", "gear", "length", "capsule"]
     """What is changed: body ``mass`` (inertia scaled with it), ``gravity`` magnitude, ``wind``
-    speed along x (with `air_density`), sliding ``friction``, joint ``damping``, actuator
-    ``gear``, or the full ``length`` of a body's capsule."""
+    speed along `axis` (with `air_density`), sliding ``friction``, joint ``damping``, actuator
+    ``gear``, the full ``length`` of a body's capsule (recompiled: mass follows), or the
+    ``capsule`` half-length edited in place as OMPO does (masses nominal; see `anchor`)."""
     low: float
     """Lower end of the interval (absolute, or a factor of nominal if `relative`)."""
     high: float
@@ -64,6 +70,15 @@ class Param:
     air_density: float = 1.2
     """``wind`` only: the medium density (kg/m³) set while the wind blows (value ≠ nominal);
     MuJoCo's default is 0, a vacuum in which wind has no effect."""
+    air_viscosity: float | None = None
+    """``wind`` only: the medium viscosity (Pa·s) set while the wind blows; None keeps the
+    model's own (MuJoCo's default 0). OMPO's Ant and Humanoid use 0.00002."""
+    axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    """``wind`` only: the unit vector the wind blows along; the value is its speed (the wind's
+    component along `axis`; the other components stay nominal). OMPO's blows along -x."""
+    anchor: Literal["centre", "base"] = "centre"
+    """``capsule`` only: what stays in place, the capsule's centre or its base (the end at -z
+    of the geom's frame, with the body's children): OMPO's torso grows up from the hip."""
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -77,9 +92,9 @@ class Param:
             raise BudgetError(
                 f"Param({self.kind!r}) needs finite low <= high, got low={self.low!r}, high={self.high!r}."
             )
-        if self.kind in ("mass", "friction", "damping", "length", "gravity") and lo < 0:
+        if self.kind in ("mass", "friction", "damping", "length", "capsule", "gravity") and lo < 0:
             raise BudgetError(f"Param({self.kind!r}) cannot be negative, got low={self.low!r}.")
-        if self.kind in ("mass", "length") and lo == 0 and not self.relative:
+        if self.kind in ("mass", "length", "capsule") and lo == 0 and not self.relative:
             raise BudgetError(f"Param({self.kind!r}) must be > 0, got low={self.low!r}.")
         if isinstance(self.names, str):
             raise ConfigError(
@@ -89,6 +104,20 @@ class Param:
             raise ConfigError(
                 f"Param({self.kind!r}) is global and takes no names, got {self.names!r}."
             )
+        self._check_options()
+
+    def _check_options(self) -> None:
+        """The kind-specific options: set only on their kind, and in range."""
+        wind = self.air_viscosity is not None or tuple(self.axis) != (1.0, 0.0, 0.0)
+        if wind and self.kind != "wind":
+            raise ConfigError(f"air_viscosity and axis are wind options, not {self.kind!r}'s.")
+        if self.anchor != "centre" and self.kind != "capsule":
+            raise ConfigError(f"anchor is an option of Param('capsule'), not {self.kind!r}'s.")
+        axis = np.asarray(self.axis, dtype=np.float64)
+        if not np.isfinite(axis).all() or abs(float(np.linalg.norm(axis)) - 1.0) > 1e-9:
+            raise ConfigError(f"Param.axis must be a unit vector, got {self.axis!r}.")
+        if self.air_viscosity is not None and not self.air_viscosity >= 0:
+            raise ConfigError(f"Param.air_viscosity must be >= 0, got {self.air_viscosity!r}.")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -129,8 +158,8 @@ class _Bound:
         self.p = p
         model = sim.model
         kind = NAMED[p.kind]
-        if kind and not p.names and p.kind == "length":
-            raise ConfigError("Param('length') needs the bodies to lengthen in names=(...).")
+        if kind and not p.names and p.kind in ("length", "capsule"):
+            raise ConfigError(f"Param({p.kind!r}) needs the bodies to lengthen in names=(...).")
         if kind and not p.names:  # every object of that kind (bodies: all but the world)
             count = {
                 "body": model.nbody,
@@ -153,6 +182,11 @@ class _Bound:
             self.ids = np.nonzero(np.isin(model.dof_jntid, self.ids))[0].astype(np.int64)
         if p.kind == "length":
             self.geoms = [_capsule_of(sim, n) for n in p.names]
+        if p.kind == "capsule":
+            self.edits = [
+                CapsuleEdit(model, int(i), n, p.anchor)
+                for i, n in zip(self.ids, p.names, strict=True)
+            ]
         self.nominal = self._read(sim)
 
     def _read(self, sim: MujocoSim) -> dict[str, np.ndarray]:
@@ -165,13 +199,19 @@ class _Bound:
         if k == "gravity":
             return {"gravity": m.opt.gravity.copy()}
         if k == "wind":
-            return {"wind": m.opt.wind.copy(), "density": np.array([m.opt.density])}
+            return {
+                "wind": m.opt.wind.copy(),
+                "density": np.array([m.opt.density]),
+                "viscosity": np.array([m.opt.viscosity]),
+            }
         if k == "friction":
             return {"friction": m.geom_friction[self.ids, 0].copy()}
         if k == "damping":
             return {"damping": m.dof_damping[self.ids].copy()}
         if k == "gear":
             return {"gear": m.actuator_gear[self.ids, 0].copy()}
+        if k == "capsule":
+            return {"half": np.array([e.half for e in self.edits])}
         return {"half": np.array([g.size[1] for g in self.geoms])}
 
     def reference(self) -> np.ndarray:
@@ -180,7 +220,7 @@ class _Bound:
         if k == "gravity":
             return np.array([-self.nominal["gravity"][2]])
         if k == "wind":
-            return np.array([self.nominal["wind"][0]])
+            return np.array([self.nominal["wind"] @ np.asarray(self.p.axis, dtype=np.float64)])
         if k == "length":
             return 2.0 * self.nominal["half"]
         return next(iter(self.nominal.values()))
@@ -197,15 +237,23 @@ class _Bound:
         elif k == "gravity":
             m.opt.gravity[2] = -float(target[0])
         elif k == "wind":
-            m.opt.wind[0] = float(target[0])
-            still = float(target[0]) == float(nom["wind"][0])
+            axis = np.asarray(self.p.axis, dtype=np.float64)  # the default x: wind[0] = target
+            m.opt.wind[:] = nom["wind"] - (nom["wind"] @ axis) * axis + float(target[0]) * axis
+            still = float(target[0]) == float(nom_values[0])
             m.opt.density = float(nom["density"][0]) if still else float(self.p.air_density)
+            viscosity = self.p.air_viscosity
+            m.opt.viscosity = float(
+                nom["viscosity"][0] if still or viscosity is None else viscosity
+            )
         elif k == "friction":
             m.geom_friction[self.ids, 0] = target
         elif k == "damping":
             m.dof_damping[self.ids] = target
         elif k == "gear":
             m.actuator_gear[self.ids, 0] = target
+        elif k == "capsule":
+            for e, half in zip(self.edits, target, strict=True):
+                e.apply(m, float(half))
         else:
             for g, full in zip(self.geoms, target, strict=True):
                 size = np.array(g.size)
@@ -223,12 +271,16 @@ class _Bound:
         elif k == "wind":
             m.opt.wind[:] = nom["wind"]
             m.opt.density = float(nom["density"][0])
+            m.opt.viscosity = float(nom["viscosity"][0])
         elif k == "friction":
             m.geom_friction[self.ids, 0] = nom["friction"]
         elif k == "damping":
             m.dof_damping[self.ids] = nom["damping"]
         elif k == "gear":
             m.actuator_gear[self.ids, 0] = nom["gear"]
+        elif k == "capsule":
+            for e in self.edits:
+                e.restore(m)
         else:
             for g, half in zip(self.geoms, nom["half"], strict=True):
                 size = np.array(g.size)

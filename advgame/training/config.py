@@ -21,7 +21,7 @@ from advgame.errors import ConfigError
 
 __all__ = ["METHODS", "PROTAGONISTS", "SAFE_ALGOS", "TEAM_ALGOS", "TrainConfig", "learner_config"]
 
-_LEARNERS = "advgame.agents.sb3:LEARNERS"
+_LEARNERS = "advgame.agents.learners:LEARNERS"
 _TEAM_LEARNERS = "advgame.agents.marl:MARL_LEARNERS"
 _SAFE_LEARNERS = "advgame.agents.safe:SAFE_LEARNERS"
 SAFE_ALGOS = ("ppo-lag", "ppo-pid", "crpo", "pcrpo")
@@ -55,6 +55,20 @@ METHODS: dict[str, dict[str, Any]] = {
         "train_budget_scale": 1.0,
         "protagonist_algo": "sa-ppo",
     },
+    "sac": {
+        "preset": "default",
+        "learned": [],
+        "train_budget_scale": 1.0,
+        "protagonist_algo": "sac",
+        "normalize": False,
+    },
+    "ompo": {
+        "preset": "default",
+        "learned": [],
+        "train_budget_scale": 1.0,
+        "protagonist_algo": "ompo",
+        "normalize": False,
+    },
     **{
         algo: {
             "preset": "default",
@@ -69,7 +83,9 @@ METHODS: dict[str, dict[str, Any]] = {
 normalized units), RARL (learned forces, trained at half the bound, tested at full), SA-PPO
 (nominal training with the state-adversarial regulariser, `advgame.agents.SAPPOConfig`),
 ATLA-SA (ATLA's alternation with an SA-PPO protagonist), PGD-AT (adversarial training on the
-current policy: a MAD attack on the learner itself during every rollout), and the constrained learners on a
+current policy: a MAD attack on the learner itself during every rollout), SAC and OMPO on raw observations and rewards, as OMPO's authors train (occupancy
+matching under shifting dynamics, `advgame.agents.ompo`; ``--preset ompo-nonstationary`` gives
+its shifting tasks), and the constrained learners on a
 safe scenario (``--preset`` picks the in-training disruption)."""
 
 
@@ -85,9 +101,19 @@ class TrainConfig:
     """Adversary agents trained in the adversary phase (None: every adversary the preset gives
     no fixed policy; []: none, i.e. plain training against fixed or no-op adversaries)."""
     protagonist_algo: Literal[
-        "ppo", "sa-ppo", "sac", "td3", "mappo", "ippo", "ppo-lag", "ppo-pid", "crpo", "pcrpo"
+        "ppo",
+        "sa-ppo",
+        "sac",
+        "td3",
+        "ompo",
+        "mappo",
+        "ippo",
+        "ppo-lag",
+        "ppo-pid",
+        "crpo",
+        "pcrpo",
     ] = "ppo"
-    """Protagonist learner: SB3 PPO/SAC/TD3 or SA-PPO (PPO with the state-adversarial
+    """Protagonist learner: SB3 PPO/SAC/TD3, OMPO (SAC with OMPO's losses), or SA-PPO (PPO with the state-adversarial
     regulariser) for one protagonist, MAPPO/IPPO for a team, or a constrained learner
     (PPO-Lagrangian, PID-Lagrangian, CRPO, PCRPO) on a safe scenario."""
     adversary_algo: Literal["ppo", "sac"] = "ppo"

@@ -127,6 +127,7 @@ class Run:
                 "checkpoint": str(final.relative_to(self.dir)),
             },
         )
+        drop_old_replays(self.ckpt, final)
         return row
 
     def _warmup(self, stats: EpisodeStats) -> None:
@@ -369,6 +370,17 @@ def commit_folder(partial: Path) -> Path:
         shutil.rmtree(final)
     os.replace(partial, final)
     return final
+
+
+def drop_old_replays(ckpt: Path, keep: Path) -> None:
+    """Delete replay buffers of checkpoints before `keep`: only a resume reads one, from the latest.
+
+    An off-policy learner's buffer is SB3's preallocated arrays (200 MB for Hopper's 1M
+    transitions), so keeping one per iteration would fill the disk; the policies stay.
+    """
+    for path in ckpt.glob("iter_*/*_replay.pkl"):
+        if path.parent != keep:
+            path.unlink(missing_ok=True)
 
 
 def now() -> float:

@@ -62,7 +62,8 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 SCHEDULE_EPISODES = 8
-"""Consecutive episodes per seed in the scheduled column (the sinusoid advances per episode)."""
+"""Episodes per seed in the scheduled column: seed ``s`` plays episodes ``8s + 1`` to ``8s + 8``
+of a per-episode schedule (`advgame.evaluation.table.jobs.schedule_index`)."""
 BUDGETS = (0.0, 0.05, 0.1, 0.15)
 """Gaussian state-noise σ of the return-vs-budget sweep (the paper's Fig. 3 levels and more)."""
 
@@ -137,7 +138,8 @@ def evaluate_policies(
         )
     seed_list = tuple(range(seeds))
     jobs = population_jobs(scenario, protagonists, columns, seeds=seed_list, episodes=episodes)
-    # A per-episode schedule needs several consecutive episodes per seed to move at all.
+    # A per-episode schedule plays episode s·E + e + 1 in episode e of seed s: more episodes
+    # per seed cover more of its sequence.
     jobs = [
         replace(j, episodes=max(episodes, SCHEDULE_EPISODES))
         if j.adversary.startswith("scheduled")

@@ -8,7 +8,10 @@ share a ``batch_key`` are asked for all their games at once: one torch forward p
 copies of a frozen SB3 network (a protagonist against every column of a table, a learned
 adversary against every protagonist) instead of one per episode. Every episode is the one the
 per-episode path (`play_job_sequential`, today's `rollout` per seed) plays with the same seed,
-so the rows are identical (``tests/test_batched_eval.py`` checks them value for value).
+so the rows are identical (``tests/test_batched_eval.py`` checks them value for value). Both
+paths tell every episode which episode of a per-episode schedule it plays
+(`advgame.evaluation.table.jobs.schedule_index`), so a sinusoidal shift moves from seed to seed
+and from episode to episode even though each episode's policies are fresh.
 `play_jobs` plays a group of jobs (`advgame.evaluation.evaluate` hands it groups of up to
 `LOCKSTEP_EPISODES` episodes in this process); `play_job` is the group of one.
 
@@ -26,7 +29,7 @@ from typing import Any
 
 from advgame.core.episodes import EpisodeResult, build_policies, rollout, rollout_batch
 from advgame.errors import ConfigError
-from advgame.evaluation.table.jobs import SEED_STRIDE, EvalJob
+from advgame.evaluation.table.jobs import SEED_STRIDE, EvalJob, schedule_index
 
 __all__ = ["LOCKSTEP_EPISODES", "play_job", "play_job_sequential", "play_jobs"]
 
@@ -69,7 +72,10 @@ def play_job_sequential(job: EvalJob) -> list[dict[str, Any]]:
         specs, results = _specs(job, game.protagonists), []
         for seed in job.seeds:
             policies = _policies(job, game, specs)
-            played = rollout(game, policies, seed=seed * SEED_STRIDE, episodes=job.episodes)
+            first = schedule_index(seed, 0, job.episodes)
+            played = rollout(
+                game, policies, seed=seed * SEED_STRIDE, episodes=job.episodes, first_index=first
+            )
             results += [(seed, i, r) for i, r in enumerate(played)]
     finally:
         game.close()
@@ -103,11 +109,12 @@ def play_jobs(jobs: Sequence[EvalJob]) -> list[list[dict[str, Any]]]:
     try:
         for job in jobs:
             plans.append(_plan(job))
-        batch = [p for p in plans if p is not None]
+        batch = [(job.episodes, p) for job, p in zip(jobs, plans, strict=True) if p is not None]
         results = rollout_batch(
-            [g for _, games, _ in batch for g in games],
-            [pol for _, _, pols in batch for pol in pols],
-            [s * SEED_STRIDE + i for eps, _, _ in batch for s, i in eps],
+            [g for _, (_, games, _) in batch for g in games],
+            [pol for _, (_, _, pols) in batch for pol in pols],
+            [s * SEED_STRIDE + i for _, (eps, _, _) in batch for s, i in eps],
+            [schedule_index(s, i, n) for n, (eps, _, _) in batch for s, i in eps],
         )
     except BaseException:
         _close([g for p in plans if p is not None for g in p[1]])

@@ -28,6 +28,7 @@ __all__ = [
     "budget_sweep",
     "lockstep_groups",
     "population_jobs",
+    "schedule_index",
     "shift_grid",
     "split_seeds",
     "unit_size",
@@ -36,6 +37,26 @@ __all__ = [
 SEED_STRIDE = 10_000
 """Episode ``i`` of evaluation seed ``s`` plays `rollout` seed ``s * SEED_STRIDE + i``, so the
 episodes of seeds 0, 1, 2, ... never share a reset seed (as ``s + i`` would)."""
+
+
+def schedule_index(seed: int, episode: int, episodes: int) -> int:
+    """The episode of a per-episode schedule that episode `episode` of evaluation seed `seed` plays.
+
+    A job's episodes are numbered seed by seed, ``k = seed * episodes + episode`` (`episodes`
+    per seed), and episode ``k`` plays schedule index ``i = k + 1``: seed 0's first episode is
+    OMPO's first training episode (its loop counts from 1), and no evaluation episode plays
+    ``i = 0``, where a sinusoid sits at its centre (the nominal body for Hopper's and
+    Walker2d's ``shift-sinusoid``). The index depends on nothing but the job, so units of
+    seeds, lockstep groups and workers play the same schedule (`split_seeds` keeps
+    `EvalJob.episodes`). Scheduled policies receive it through ``set_episode_index``
+    (`advgame.core.episodes.reseed_policies`); other policies ignore it.
+
+    Example:
+        >>> [schedule_index(s, 0, 1) for s in range(4)], schedule_index(2, 1, 8)
+        ([1, 2, 3, 4], 18)
+
+    """
+    return seed * episodes + episode + 1
 
 
 def _check_spec(spec: Any, what: str) -> None:
@@ -80,7 +101,8 @@ class EvalJob:
     adversary_specs: Mapping[str, Any] = field(default_factory=dict)
     """``{adversary agent id: spec}``; adversaries not listed play their no-op."""
     seeds: tuple[int, ...] = (0,)
-    """Distinct seeds; episode ``i`` of seed ``s`` resets with ``s * SEED_STRIDE + i``."""
+    """Distinct seeds; episode ``i`` of seed ``s`` resets with ``s * SEED_STRIDE + i`` and is
+    episode ``s * episodes + i + 1`` of a per-episode schedule (`schedule_index`)."""
     episodes: int = 1
     """Episodes per seed."""
     tags: Mapping[str, Any] = field(default_factory=dict)

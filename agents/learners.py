@@ -1,0 +1,17 @@
+"""Single-agent learner configs by algorithm name: SB3's PPO, SAC and TD3, SA-PPO and OMPO."""
+
+from __future__ import annotations
+
+from advgame.agents.ompo_config import OMPOConfig
+from advgame.agents.sb3 import PPOConfig, SACConfig, SAPPOConfig, TD3Config
+
+__all__ = ["LEARNERS"]
+
+LEARNERS: dict[str, type] = {
+    "ppo": PPOConfig,
+    "sa-ppo": SAPPOConfig,
+    "sac": SACConfig,
+    "td3": TD3Config,
+    "ompo": OMPOConfig,
+}
+"""Learner configs by algorithm name (`advgame.training.TrainConfig.protagonist_algo`)."""
