@@ -113,3 +113,6 @@ _robosuite("TwoArmPegInHole", "insert a peg into a hole held by the other arm (t
 _robosuite("TwoArmHandover", "hand a hammer from one arm to the other (two Pandas)")
 _robosuite("TwoArmTransport", "move an object between two tables (two Pandas)")
 _robosuite("MultiRobustDoor", "open a door while an adversarial second arm impedes (two Pandas)")
+# The paper's causal tasks (robosuite_causal.py): a spurious feature correlated in training.
+_robosuite("LiftCausal", "lift a cube whose observed colour goes with its side (Panda)")
+_robosuite("DoorCausal", "open a door turned left or right, its handle high or low (Panda)")

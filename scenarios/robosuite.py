@@ -1,4 +1,4 @@
-"""robosuite scenarios (family ``"robosuite"``): the paper's twelve manipulation tasks.
+"""robosuite scenarios (family ``"robosuite"``): the paper's twelve tasks and its two causal ones.
 
 Presets of every robosuite scenario:
 
@@ -8,12 +8,15 @@ Presets of every robosuite scenario:
 
 Lift, Stack and Door add ``object-obs`` (an observation attack on the ``object-state`` key only,
 ε = 0.05; any scenario takes ``ObservationDisruptor(keys=["object-state"])``) and ``table`` (table offset and height per episode: ±5 cm in x and y,
-±3 cm in height, objects moving with the table); Door adds ``door-causal`` (one adversary
+±3 cm in height, objects moving with the table); Door adds ``door-shift`` (one adversary
 dimension moves the door up to 10 cm away and raises the handle up to 5 cm, together); Lift adds
-``lift-causal`` (one dimension moves the cube up to 8 cm along y and turns it blue (u > 0) or
-green (u < 0)). MultiRobustDoor's ``default`` is the adversarial arm (robot 1, its controller's
-full range), and so is its ``rarl`` (what ``--method rarl`` trains: the arm at half its range,
-evaluated at its full range); its ``full`` adds observation and action adversaries.
+``lift-shift`` (one dimension moves the cube up to 8 cm along y and turns it blue (u > 0) or
+green (u < 0)). These two were called ``door-causal`` and ``lift-causal`` before the paper's
+causal tasks arrived: those are the scenarios ``RS-LiftCausal`` and ``RS-DoorCausal``, whose
+presets are in `advgame.scenarios.robosuite_causal`. MultiRobustDoor's ``default`` is the
+adversarial arm (robot 1, its controller's full range), and so is its ``rarl`` (what
+``--method rarl`` trains: the arm at half its range, evaluated at its full range); its ``full``
+adds observation and action adversaries.
 """
 
 from __future__ import annotations
@@ -33,8 +36,9 @@ from advgame.disruptors import (
     Shift,
     WorkspaceDisruptor,
 )
+from advgame.scenarios.robosuite_causal import CAUSAL_TASKS, causal_presets
 
-__all__ = ["ENVS", "door_causal", "lift_causal", "make_task", "presets", "table_shift"]
+__all__ = ["ENVS", "door_shift", "lift_shift", "make_task", "presets", "table_shift"]
 
 ENVS: dict[str, dict[str, Any]] = {
     "Lift": {"robots": "Panda"},
@@ -49,6 +53,8 @@ ENVS: dict[str, dict[str, Any]] = {
     "TwoArmHandover": {"robots": ["Panda", "Panda"]},
     "TwoArmTransport": {"robots": ["Panda", "Panda"]},
     "MultiRobustDoor": {"robots": ["Panda", "Panda"], "external_robots": (1,)},
+    "LiftCausal": {"robots": "Panda"},
+    "DoorCausal": {"robots": "Panda"},
 }
 """Task-base keyword arguments per robosuite environment (scenario id ``"RS-<env>"``)."""
 
@@ -79,8 +85,8 @@ def table_shift(env_name: str, xy: float = 0.05, z: float = 0.03) -> WorkspaceDi
     )
 
 
-def door_causal(distance: float = 0.10, height: float = 0.05) -> WorkspaceDisruptor:
-    """DoorCausal: door distance and handle height varied together by one adversary dimension."""
+def door_shift(distance: float = 0.10, height: float = 0.05) -> WorkspaceDisruptor:
+    """Door distance and handle height varied together by one adversary dimension."""
     return WorkspaceDisruptor(
         shifts=(
             Shift(
@@ -94,8 +100,8 @@ def door_causal(distance: float = 0.10, height: float = 0.05) -> WorkspaceDisrup
     )
 
 
-def lift_causal(distance: float = 0.08) -> WorkspaceDisruptor:
-    """LiftCausal: cube position and colour varied together by one adversary dimension."""
+def lift_shift(distance: float = 0.08) -> WorkspaceDisruptor:
+    """Cube position and colour (not observed in state) varied together by one dimension."""
     return WorkspaceDisruptor(
         shifts=(
             Shift(
@@ -120,6 +126,8 @@ def presets(scenario_id: str) -> dict[str, Preset]:
     env = scenario_id.removeprefix("RS-")
     base = (ObservationDisruptor(eps=0.05), ActionDisruptor(eps=0.1))
     full = (*base[:1], RewardDisruptor(eps=0.1), base[1], _dynamics())
+    if scenario_id in CAUSAL_TASKS:
+        return causal_presets(scenario_id, full)
     if env == "MultiRobustDoor":
         arm = ArmDisruptor(robot=1)
         return {
@@ -132,20 +140,22 @@ def presets(scenario_id: str) -> dict[str, Preset]:
         "full": Preset(full, description="observation, reward, action and dynamics"),
     }
     if env in TABLE_OBJECTS:
-        out["object-obs"] = Preset(
-            (ObservationDisruptor(eps=0.05, keys=("object-state",)),),
-            {"observation_adversary": GaussianAdversary(std=0.02)},
-            "observation attack on the object-state key only",
-        )
+        out["object-obs"] = _object_obs()
         out["table"] = Preset(
             (table_shift(env),), description="table offset and height per episode"
         )
     if env == "Door":
-        out["door-causal"] = Preset(
-            (door_causal(),), description="DoorCausal: door distance + handle height"
+        out["door-shift"] = Preset(
+            (door_shift(),), description="door distance + handle height, together"
         )
     if env == "Lift":
-        out["lift-causal"] = Preset(
-            (lift_causal(),), description="LiftCausal: cube position + colour"
-        )
+        out["lift-shift"] = Preset((lift_shift(),), description="cube position + colour, together")
     return out
+
+
+def _object_obs() -> Preset:
+    return Preset(
+        (ObservationDisruptor(eps=0.05, keys=("object-state",)),),
+        {"observation_adversary": GaussianAdversary(std=0.02)},
+        "observation attack on the object-state key only",
+    )

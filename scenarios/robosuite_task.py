@@ -245,6 +245,7 @@ def _make_env(
 ) -> Any:
     import robosuite
 
+    import advgame.scenarios.robosuite_causal_envs  # registers LiftCausal and DoorCausal
     import advgame.scenarios.robosuite_envs  # noqa: F401 - registers MultiRobustDoor with robosuite
 
     _check_name("robosuite environment", env_name, robosuite.ALL_ENVIRONMENTS)

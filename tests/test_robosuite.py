@@ -44,7 +44,7 @@ def warm() -> None:
 
 @pytest.fixture
 def lift(warm: None) -> Iterator[advgame.Game]:
-    game = advgame.make("RS-Lift", preset="lift-causal", max_episode_steps=5)
+    game = advgame.make("RS-Lift", preset="lift-shift", max_episode_steps=5)
     yield game
     game.close()
 
@@ -63,7 +63,7 @@ def _setup(game: advgame.Game, agent: str, u: list[float], seed: int = 0) -> dic
     return {"before": first["protagonist"], "after": game.observe("protagonist")}
 
 
-def test_lift_causal_moves_and_recolours_the_cube_then_reset_restores(lift: advgame.Game) -> None:
+def test_lift_shift_moves_and_recolours_the_cube_then_reset_restores(lift: advgame.Game) -> None:
     sim = lift.task.sim
     body, geom = _id(lift, "body", "cube_main"), _id(lift, "geom", "cube_g0_vis")
     lift.reset(seed=0)
@@ -82,8 +82,8 @@ def test_lift_causal_moves_and_recolours_the_cube_then_reset_restores(lift: advg
     np.testing.assert_array_equal(sim.model.geom_rgba[geom], rgba0)
 
 
-def test_door_causal_moves_door_and_raises_handle_together(warm: None) -> None:
-    game = advgame.make("RS-Door", preset="door-causal", max_episode_steps=5)
+def test_door_shift_moves_door_and_raises_handle_together(warm: None) -> None:
+    game = advgame.make("RS-Door", preset="door-shift", max_episode_steps=5)
     sim, env = game.task.sim, game.task.env
     door = _id(game, "body", "Door_main")
     game.reset(seed=1)
@@ -276,9 +276,9 @@ UNITS = hnp.arrays(np.float32, 4, elements=st.floats(-3.0, 3.0, width=32))
 
 @pytest.fixture(scope="module")
 def workspace_game(warm: None) -> Iterator[advgame.Game]:
-    from advgame.scenarios.robosuite import lift_causal, table_shift
+    from advgame.scenarios.robosuite import lift_shift, table_shift
 
-    shifts = (*table_shift("Lift").shifts, *lift_causal().shifts)
+    shifts = (*table_shift("Lift").shifts, *lift_shift().shifts)
     game = advgame.make(
         "RS-Lift", disruptors=[WorkspaceDisruptor(shifts=shifts)], max_episode_steps=3
     )
@@ -343,7 +343,7 @@ def test_advgame_list_shows_the_robosuite_family(capsys: pytest.CaptureFixture[s
     assert "adversarial second arm" in out
     assert main(["list", "--family", "robosuite"]) == 0
     ids = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
-    assert ids == advgame.list_scenarios("robosuite") and len(ids) == 12
+    assert ids == advgame.list_scenarios("robosuite") and len(ids) == 14  # 12 + 2 causal
 
 
 def _hold(obs: np.ndarray) -> np.ndarray:
@@ -383,7 +383,7 @@ def test_workspace_adversary_learns_one_decision_per_episode(
 
     from advgame.core.views import SingleAgentView
 
-    game = advgame.make("RS-Lift", preset="lift-causal", max_episode_steps=3)
+    game = advgame.make("RS-Lift", preset="lift-shift", max_episode_steps=3)
     view = SingleAgentView(game, "workspace_adversary", {"protagonist": _hold})
     check_env(view, warn=False)
     view.reset(seed=0)

@@ -1,6 +1,6 @@
 """The workspace disruptor on a Gymnasium MuJoCo task: a setup move, then the nominal model back.
 
-The robosuite presets (table, DoorCausal, LiftCausal) are tested in tests/test_robosuite.py;
+The robosuite presets (table, door-shift, lift-shift) are tested in tests/test_robosuite.py;
 here the disruptor itself runs on Pusher-v5, whose observation shows the goal's position.
 """
 

@@ -1,16 +1,17 @@
 """The workspace disruptor (external, per episode): where things stand and what colour they are.
 
 Each `Shift` is one adversary action dimension ``u ∈ [-1, 1]``. It moves bodies by ``u·offset``
-(metres, world frame) and recolours geoms from their nominal colour (``u = 0``) towards
-``rgba_high`` (``u = 1``) or ``rgba_low`` (``u = -1``). Several effects on one dimension are
-*correlated* disturbances, the paper's causal settings: DoorCausal moves the door away and the
-handle up together; LiftCausal moves the cube and changes its colour together.
+(metres, world frame), turns them by ``u·yaw`` about the vertical through their own origin, and
+recolours geoms from their nominal colour (``u = 0``) towards ``rgba_high`` (``u = 1``) or
+``rgba_low`` (``u = -1``). Several effects on one dimension are *correlated* disturbances (the
+``door-shift`` preset moves the door away and the handle up together); the paper's causal tasks
+put a causal and a spurious feature on two dimensions (`advgame.scenarios.robosuite_causal`).
 
 The adversary chooses once per episode, at reset, in a *setup move* of its own (before the
 protagonist's first observation, which shows the disturbed workspace). Fixed bodies move through
-``model.body_pos``; bodies on a free joint (objects) through their ``qpos``; colours through
-``model.geom_rgba``. The model edits are written back on the next reset, so a nominal reset
-is the nominal workspace again.
+``model.body_pos`` and ``model.body_quat``; bodies on a free joint (objects) through their
+``qpos``; colours through ``model.geom_rgba``. The model edits are written back on the next
+reset, so a nominal reset is the nominal workspace again.
 """
 
 from __future__ import annotations
@@ -55,6 +56,9 @@ class Shift:
     """Colour of `geoms` at ``u = 1`` (nominal at ``u = 0``, linear in between)."""
     rgba_low: Sequence[float] = (0.0, 1.0, 0.0, 1.0)
     """Colour of `geoms` at ``u = -1``."""
+    yaw: float = 0.0
+    """Turn (radians) of `bodies` at ``u = 1``, about the z axis through each body's origin (the
+    parent frame's z: the world's for top-level bodies and free objects)."""
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -69,15 +73,20 @@ class Shift:
                 raise BudgetError(
                     f"Shift {self.name!r}: colours are 4 values in [0, 1], got {c!r}."
                 )
+        if not np.isfinite(self.yaw) or (self.yaw != 0.0 and not self.bodies):
+            raise BudgetError(
+                f"Shift {self.name!r}: yaw turns `bodies`; it must be finite and needs at least "
+                f"one body, got yaw={self.yaw!r}, bodies={tuple(self.bodies)!r}."
+            )
         if isinstance(self.bodies, str) or isinstance(self.geoms, str):
             raise ConfigError(f"Shift {self.name!r}: bodies and geoms are lists of names.")
         if not (self.bodies or self.body_offsets or self.geoms):
             raise ConfigError(f"Shift {self.name!r} moves and recolours nothing.")
 
-    def moves(self) -> list[tuple[str, np.ndarray]]:
-        """Every (body, displacement at ``u = 1``)."""
-        out = [(b, np.asarray(self.offset, dtype=np.float64)) for b in self.bodies]
-        out += [(b, np.asarray(o, dtype=np.float64)) for b, o in self.body_offsets]
+    def moves(self) -> list[tuple[str, np.ndarray, float]]:
+        """Every (body, displacement at ``u = 1``, turn at ``u = 1``)."""
+        out = [(b, np.asarray(self.offset, dtype=np.float64), float(self.yaw)) for b in self.bodies]
+        out += [(b, np.asarray(o, dtype=np.float64), 0.0) for b, o in self.body_offsets]
         return out
 
 
@@ -113,10 +122,10 @@ class WorkspaceDisruptor(DisruptorSpec):
 class _Move:
     """One body's move per unit of its dimension: a fixed body (model) or a free joint (qpos)."""
 
-    def __init__(self, sim: MujocoSim, name: str, delta: np.ndarray) -> None:
+    def __init__(self, sim: MujocoSim, name: str, delta: np.ndarray, yaw: float) -> None:
         import mujoco
 
-        self.name, self.delta = name, delta
+        self.name, self.delta, self.yaw = name, delta, yaw
         self.body = sim.body_id(name)
         m = sim.model
         jnt = int(m.body_jntadr[self.body])
@@ -132,7 +141,7 @@ class WorkspaceRuntime(Disruptor):
     """The game plays it in a setup move after the task's reset, before anyone else moves."""
 
     def __init__(self, spec: WorkspaceDisruptor, sim: MujocoSim) -> None:
-        self.dims = [[_Move(sim, b, d) for b, d in s.moves()] for s in spec.shifts]
+        self.dims = [[_Move(sim, b, d, y) for b, d, y in s.moves()] for s in spec.shifts]
         self.colours = [
             (
                 np.array([sim.geom_id(g) for g in s.geoms], dtype=np.int64),
@@ -161,6 +170,8 @@ class WorkspaceRuntime(Disruptor):
                     self._save(sim, "body_pos", mv.body)
                     m.body_pos[mv.body] += delta
                 sim.body_moved(mv.name, delta)
+                if mv.yaw:
+                    self._turn(sim, mv, v * mv.yaw)
             if geoms.size:
                 for g in geoms:
                     self._save(sim, "geom_rgba", int(g))
@@ -168,6 +179,20 @@ class WorkspaceRuntime(Disruptor):
                 target = high if v >= 0 else low
                 m.geom_rgba[geoms] = nominal + abs(v) * (target - nominal)
         self.applied = np.array(u, dtype=np.float64)
+
+    def _turn(self, sim: MujocoSim, mv: _Move, angle: float) -> None:
+        """Turn body `mv` by `angle` about the world z axis through its origin."""
+        import mujoco
+
+        turn = np.array([np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)])
+        if mv.free:
+            quat = sim.data.qpos[mv.qpos + 3 : mv.qpos + 7]
+        else:
+            self._save(sim, "body_quat", mv.body)
+            quat = sim.model.body_quat[mv.body]
+        out = np.empty(4)
+        mujoco.mju_mulQuat(out, turn, quat.copy())
+        quat[:] = out
 
     def _save(self, sim: MujocoSim, field_name: str, idx: int) -> None:
         self._saved.append((field_name, idx, getattr(sim.model, field_name)[idx].copy()))
