@@ -1,4 +1,4 @@
-"""Protagonist learners: Stable-Baselines3 PPO/SAC/TD3 configs, SA-PPO, OMPO, and MAPPO/IPPO for teams."""
+"""Protagonist learners: Stable-Baselines3 PPO/SAC/TD3 configs, SA-PPO, OMPO, DBC, RSC, and MAPPO/IPPO for teams."""
 
 if __name__ != "advgame.agents":  # pragma: no cover - packaging guard
     raise ImportError(
@@ -6,18 +6,22 @@ if __name__ != "advgame.agents":  # pragma: no cover - packaging guard
         "(pip install -e . from the repository root), not as the bare `agents`."
     )
 
+from advgame.agents.dbc_config import DBCConfig
 from advgame.agents.learners import LEARNERS
 from advgame.agents.marl import MARL_LEARNERS, IPPOConfig, MAPPOConfig, TeamLearner
 from advgame.agents.ompo_config import OMPOConfig
+from advgame.agents.rsc_config import RSCConfig
 from advgame.agents.sb3 import PPOConfig, SACConfig, SAPPOConfig, TD3Config
 
 __all__ = [
     "LEARNERS",
     "MARL_LEARNERS",
+    "DBCConfig",
     "IPPOConfig",
     "MAPPOConfig",
     "OMPOConfig",
     "PPOConfig",
+    "RSCConfig",
     "SACConfig",
     "SAPPOConfig",
     "TD3Config",

@@ -23,7 +23,7 @@ from advgame.errors import ConfigError, FileFormatError
 
 __all__ = ["ALGOS", "Normalizer", "SB3Checkpoint", "SB3Policy", "load_model", "load_normalizer"]
 
-ALGOS = ("ppo", "sac", "td3", "ompo")
+ALGOS = ("ppo", "sac", "td3", "ompo", "dbc", "rsc")
 CHECKPOINT_FIX = (
     "Save it again from the model (or rerun the training iteration that wrote it); a copy "
     "cut short in transfer loads once copied whole."
@@ -39,6 +39,14 @@ def _algo_class(algo: str) -> Any:
         from advgame.agents.ompo import OMPO
 
         return OMPO
+    if algo == "dbc":
+        from advgame.agents.dbc import DBC
+
+        return DBC
+    if algo == "rsc":
+        from advgame.agents.rsc import RSC
+
+        return RSC
     if algo not in classes:
         raise ConfigError(f"Unknown algorithm {algo!r}; expected one of {ALGOS}.")
     return classes[algo]

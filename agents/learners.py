@@ -1,8 +1,10 @@
-"""Single-agent learner configs by algorithm name: SB3's PPO, SAC and TD3, SA-PPO and OMPO."""
+"""Single-agent learner configs by algorithm name: SB3's PPO, SAC and TD3, SA-PPO, OMPO, DBC and RSC."""
 
 from __future__ import annotations
 
+from advgame.agents.dbc_config import DBCConfig
 from advgame.agents.ompo_config import OMPOConfig
+from advgame.agents.rsc_config import RSCConfig
 from advgame.agents.sb3 import PPOConfig, SACConfig, SAPPOConfig, TD3Config
 
 __all__ = ["LEARNERS"]
@@ -13,5 +15,7 @@ LEARNERS: dict[str, type] = {
     "sac": SACConfig,
     "td3": TD3Config,
     "ompo": OMPOConfig,
+    "dbc": DBCConfig,
+    "rsc": RSCConfig,
 }
 """Learner configs by algorithm name (`advgame.training.TrainConfig.protagonist_algo`)."""

@@ -51,10 +51,9 @@ class OMPOConfig(_OffPolicyConfig):
         super().__post_init__()
         if not self.exponent > 1:
             raise ConfigError(f"OMPOConfig.exponent must be > 1, got {self.exponent!r}.")
-        for name in ("gradient_steps", "target_update_interval", "local_size", "disc_batch"):
-            value = getattr(self, name)
-            if type(value) is not int or value < 1:
-                raise ConfigError(f"OMPOConfig.{name} must be an int >= 1, got {value!r}.")
+        self._check_ints(
+            ("gradient_steps", "target_update_interval", "local_size", "disc_batch"), 1
+        )
 
     @staticmethod
     def model_class() -> Any:
@@ -67,16 +66,7 @@ class OMPOConfig(_OffPolicyConfig):
         self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
     ) -> Any:
         """Build an `OMPO` on `env`; refuses what OMPO cannot serve before anything trains."""
-        from gymnasium import spaces
-
-        if not isinstance(env.action_space, spaces.Box) or not isinstance(
-            env.observation_space, spaces.Box
-        ):
-            raise ConfigError(
-                f"OMPO needs continuous (Box) actions and flat Box observations, got actions "
-                f"{env.action_space} and observations {env.observation_space}; it serves "
-                "single-agent MuJoCo-style tasks (e.g. Hopper-v5, Ant-v5)."
-            )
+        self._require_state_control(env, "OMPO")
         return self.model_class()(
             "MlpPolicy", env, train_freq=1, gradient_steps=self.gradient_steps,
             ent_coef=self.ent_coef, target_update_interval=self.target_update_interval,

@@ -205,6 +205,33 @@ class _OffPolicyConfig(_SB3Config):
     batch_size: int = 64
     """Minibatch size."""
 
+    def _check_ints(self, names: tuple[str, ...], minimum: int) -> None:
+        """Each of the fields `names` must be an int >= `minimum` (a clear error otherwise)."""
+        for name in names:
+            value = getattr(self, name)
+            if type(value) is not int or value < minimum:
+                raise ConfigError(
+                    f"{type(self).__name__}.{name} must be an int >= {minimum}, got {value!r}."
+                )
+
+    @staticmethod
+    def _require_state_control(env: Any, method: str) -> None:
+        """Refuse, before anything trains, a task `method` cannot serve.
+
+        It needs continuous (Box) actions and flat (1-D Box) observations.
+        """
+        from gymnasium import spaces
+
+        act, obs = env.action_space, env.observation_space
+        if not (
+            isinstance(act, spaces.Box) and isinstance(obs, spaces.Box) and len(obs.shape) == 1
+        ):
+            raise ConfigError(
+                f"{method} needs continuous (Box) actions and flat (1-D Box) observations, got "
+                f"actions {act} and observations {obs}; it serves single-agent tasks with state "
+                "observations (e.g. Hopper-v5, InvertedPendulum-v5). Use --method sac or ppo here."
+            )
+
     def _off_policy(
         self, seed: int, total_steps: int, tensorboard_log: str | None
     ) -> dict[str, Any]:

@@ -82,7 +82,11 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--scenario", help="the scenario to play (default: the runs' scenario)")
     for flag, metavar, text in (
-        ("--checkpoint", "NAME=PATH[:ALGO]", "an SB3 model (ppo, sac, td3) as a protagonist"),
+        (
+            "--checkpoint",
+            "NAME=PATH[:ALGO]",
+            "an SB3 model as a protagonist (ALGO: ppo, sac, td3, ompo, dbc, rsc; default ppo)",
+        ),
         ("--normalizer", "NAME=PATH", "its VecNormalize pickle or obs-norm .npz"),
         ("--raw-obs", "NAME", "checkpoint NAME was trained on raw observations (no normalizer)"),
         ("--callable", "NAME=MODULE:FUNCTION", "a plain function obs -> action as a protagonist"),

@@ -69,6 +69,20 @@ METHODS: dict[str, dict[str, Any]] = {
         "protagonist_algo": "ompo",
         "normalize": False,
     },
+    "dbc": {
+        "preset": "default",
+        "learned": [],
+        "train_budget_scale": 1.0,
+        "protagonist_algo": "dbc",
+        "normalize": False,
+    },
+    "rsc": {
+        "preset": "default",
+        "learned": [],
+        "train_budget_scale": 1.0,
+        "protagonist_algo": "rsc",
+        "normalize": False,
+    },
     **{
         algo: {
             "preset": "default",
@@ -85,7 +99,9 @@ normalized units), RARL (learned forces, trained at half the bound, tested at fu
 ATLA-SA (ATLA's alternation with an SA-PPO protagonist), PGD-AT (adversarial training on the
 current policy: a MAD attack on the learner itself during every rollout), SAC and OMPO on raw observations and rewards, as OMPO's authors train (occupancy
 matching under shifting dynamics, `advgame.agents.ompo`; ``--preset ompo-nonstationary`` gives
-its shifting tasks), and the constrained learners on a
+its shifting tasks), DBC on raw observations and rewards as its authors train (a bisimulation
+encoder on SB3's SAC, `advgame.agents.dbc`), RSC likewise (SAC on real transitions mixed with
+augmented ones from a causal world model, `advgame.agents.rsc`), and the constrained learners on a
 safe scenario (``--preset`` picks the in-training disruption)."""
 
 
@@ -106,6 +122,8 @@ class TrainConfig:
         "sac",
         "td3",
         "ompo",
+        "dbc",
+        "rsc",
         "mappo",
         "ippo",
         "ppo-lag",
@@ -113,7 +131,7 @@ class TrainConfig:
         "crpo",
         "pcrpo",
     ] = "ppo"
-    """Protagonist learner: SB3 PPO/SAC/TD3, OMPO (SAC with OMPO's losses), or SA-PPO (PPO with the state-adversarial
+    """Protagonist learner: SB3 PPO/SAC/TD3, OMPO (SAC with OMPO's losses), DBC (SAC on a bisimulation encoder), RSC (SAC on causally augmented data), or SA-PPO (PPO with the state-adversarial
     regulariser) for one protagonist, MAPPO/IPPO for a team, or a constrained learner
     (PPO-Lagrangian, PID-Lagrangian, CRPO, PCRPO) on a safe scenario."""
     adversary_algo: Literal["ppo", "sac"] = "ppo"
