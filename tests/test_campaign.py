@@ -279,3 +279,26 @@ def test_a_safe_campaign_tables_return_cost_and_satisfaction_per_method(tmp_path
     spec.write_text(SAFE.replace("cost_limit = 25", "cost_limit = -1"))
     with pytest.raises(ConfigError, match="cost_limit"):
         load_campaign(spec)
+
+
+def test_compact_keeps_the_last_checkpoint_without_its_replay_buffer(tmp_path: Path) -> None:
+    from advgame.training.population import Population
+    from advgame.workflows.campaign import compact
+
+    run = tmp_path / "run"
+    for it in (1, 2):
+        folder = run / "checkpoints" / f"iter_{it:04d}"
+        folder.mkdir(parents=True)
+        (folder / "protagonist.zip").write_bytes(b"model")
+        (folder / "protagonist_replay.pkl").write_bytes(b"buffer")  # an off-policy learner's
+    (run / "tb").mkdir()
+    (run / "state.json").write_text(
+        json.dumps({"iteration": 2, "checkpoint": "checkpoints/iter_0002"})
+    )
+    Population().save(run / "population.json")
+    compact(run)
+    assert [f.name for f in (run / "checkpoints").iterdir()] == ["iter_0002"]
+    assert sorted(f.name for f in (run / "checkpoints" / "iter_0002").iterdir()) == [
+        "protagonist.zip"
+    ]
+    assert not (run / "tb").exists()

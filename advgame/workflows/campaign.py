@@ -108,8 +108,10 @@ def run_dir(out: Path, run: str) -> Path:
 def compact(run: Path) -> None:
     """Keep what a finished run is evaluated and released from: its last checkpoint.
 
-    Earlier checkpoint folders and TensorBoard logs are deleted and the population keeps the
-    members whose files remain, so a finished run is a few hundred KB that can be committed
+    Earlier checkpoint folders, TensorBoard logs and the off-policy learners' replay buffers
+    (only a resume reads one, and a finished run never trains again) are deleted, and the
+    population keeps the members whose files remain, so a finished run is a few hundred KB
+    (a few MB for the 256-wide networks of OMPO, RSC and DBC) that can be committed
     (``config.json``, ``state.json``, ``population.json``, ``progress.csv``, the last
     checkpoint).
     """
@@ -123,6 +125,8 @@ def compact(run: Path) -> None:
         if folder.resolve() != last:
             shutil.rmtree(folder)
     shutil.rmtree(run / "tb", ignore_errors=True)
+    for replay in last.glob("*_replay.pkl"):
+        replay.unlink()
     population = Population.load(run / "population.json")
     population.members = [m for m in population if _files_exist(m.spec)]
     population.save(run / "population.json")
