@@ -32,24 +32,19 @@ CHECKPOINT_FIX = (
 
 
 def _algo_class(algo: str) -> Any:
+    """The SB3 class that loads a checkpoint of `algo`.
+
+    SB3's own for PPO, SAC and TD3; otherwise the class its learner config trains
+    (``model_class``: OMPO, DBC, RSC), so a new learner registers in one place.
+    """
     import stable_baselines3 as sb3
 
-    classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}
-    if algo == "ompo":
-        from advgame.agents.ompo import OMPO
+    from advgame.agents.learners import LEARNERS
 
-        return OMPO
-    if algo == "dbc":
-        from advgame.agents.dbc import DBC
-
-        return DBC
-    if algo == "rsc":
-        from advgame.agents.rsc import RSC
-
-        return RSC
-    if algo not in classes:
+    if algo not in ALGOS:
         raise ConfigError(f"Unknown algorithm {algo!r}; expected one of {ALGOS}.")
-    return classes[algo]
+    classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}
+    return classes[algo] if algo in classes else LEARNERS[algo].model_class()
 
 
 @functools.lru_cache(maxsize=64)
