@@ -65,6 +65,15 @@ class _SB3Config:
                 f"{type(self).__name__}.net_arch must be positive ints, got {self.net_arch!r}."
             )
 
+    def _check_ints(self, names: tuple[str, ...], minimum: int) -> None:
+        """Each of the fields `names` must be an int >= `minimum` (a clear error otherwise)."""
+        for name in names:
+            value = getattr(self, name)
+            if type(value) is not int or value < minimum:
+                raise ConfigError(
+                    f"{type(self).__name__}.{name} must be an int >= {minimum}, got {value!r}."
+                )
+
     @staticmethod
     def policy(env: Any) -> str:
         """SB3's policy class name for `env`: ``MultiInputPolicy`` for Dict observations."""
@@ -159,8 +168,7 @@ class SAPPOConfig(PPOConfig):
             raise ConfigError(f"SAPPOConfig.sa_kappa must be >= 0, got {self.sa_kappa!r}.")
         if not (isinstance(self.sa_eps, (int, float)) and self.sa_eps >= 0):
             raise ConfigError(f"SAPPOConfig.sa_eps must be >= 0, got {self.sa_eps!r}.")
-        if type(self.sa_steps) is not int or self.sa_steps < 0:
-            raise ConfigError(f"SAPPOConfig.sa_steps must be an int >= 0, got {self.sa_steps!r}.")
+        self._check_ints(("sa_steps",), 0)
         if not (isinstance(self.sa_ramp, (int, float)) and 0 <= self.sa_ramp <= 1):
             raise ConfigError(f"SAPPOConfig.sa_ramp must be in [0, 1], got {self.sa_ramp!r}.")
         if self.sa_space not in ("normalized", "raw"):
@@ -204,15 +212,6 @@ class _OffPolicyConfig(_SB3Config):
     """Random steps before learning (paper: start time step 10000)."""
     batch_size: int = 64
     """Minibatch size."""
-
-    def _check_ints(self, names: tuple[str, ...], minimum: int) -> None:
-        """Each of the fields `names` must be an int >= `minimum` (a clear error otherwise)."""
-        for name in names:
-            value = getattr(self, name)
-            if type(value) is not int or value < minimum:
-                raise ConfigError(
-                    f"{type(self).__name__}.{name} must be an int >= {minimum}, got {value!r}."
-                )
 
     @staticmethod
     def _require_state_control(env: Any, method: str) -> None:
