@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from calibrate import step_through as step_through  # re-exported: the one stepping loop
 
 from advgame.evaluation.table.payoff import ci95
 
@@ -15,16 +16,6 @@ from advgame.evaluation.table.payoff import ci95
 def fmt(values: list[float]) -> str:
     """``"mean ± half-width"`` of `values` (95 % Student-t interval), rounded to integers."""
     return f"{float(np.mean(values)):.0f} ± {ci95(values):.0f}"
-
-
-def step_through(env: Any, actions: np.ndarray) -> float:
-    """Step a Gymnasium env with each of `actions` (resetting at episode ends); wall seconds."""
-    start = time.perf_counter()
-    for a in actions:
-        _, _, terminated, truncated, _ = env.step(a)
-        if terminated or truncated:
-            env.reset()
-    return time.perf_counter() - start
 
 
 def quartiles(values: list[float]) -> str:

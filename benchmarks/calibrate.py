@@ -36,14 +36,18 @@ def step_us(steps: int = 20_000, repeats: int = 5, warmup: int = 1_000, seed: in
     space = cast(gym.spaces.Box, env.action_space)
     rng = np.random.default_rng(seed)
     actions = rng.uniform(space.low, space.high, (warmup + steps, *space.shape)).astype(space.dtype)
-    _run(env, actions[:warmup])
-    means = [_run(env, actions[warmup:]) / steps * 1e6 for _ in range(repeats)]
+    step_through(env, actions[:warmup])
+    means = [step_through(env, actions[warmup:]) / steps * 1e6 for _ in range(repeats)]
     env.close()
     return statistics.median(means)
 
 
-def _run(env: gym.Env, actions: np.ndarray) -> float:
-    """Wall seconds of stepping `env` with each of `actions`, resetting at episode ends."""
+def step_through(env: gym.Env, actions: np.ndarray) -> float:
+    """Wall seconds of stepping `env` with each of `actions`, resetting at episode ends.
+
+    The benchmarks' one stepping loop (`_common` re-exports it); it lives here because this
+    script must run without advgame.
+    """
     start = time.perf_counter()
     for a in actions:
         _, _, terminated, truncated, _ = env.step(a)
