@@ -1,4 +1,4 @@
-"""Protagonist learners: Stable-Baselines3 PPO/SAC/TD3 configs, SA-PPO, OMPO, DBC, RSC, and MAPPO/IPPO for teams."""
+"""Protagonist learners: Stable-Baselines3 PPO/SAC/TD3 configs, SA-PPO, OMPO, DBC, RSC, LSTM PPO (plain and SA), and MAPPO/IPPO for teams."""
 
 if __name__ != "advgame.agents":  # pragma: no cover - packaging guard
     raise ImportError(
@@ -10,7 +10,9 @@ from advgame.agents.dbc_config import DBCConfig
 from advgame.agents.learners import LEARNERS
 from advgame.agents.marl import MARL_LEARNERS, IPPOConfig, MAPPOConfig, TeamLearner
 from advgame.agents.ompo_config import OMPOConfig
+from advgame.agents.recurrent import RecurrentPPOConfig
 from advgame.agents.rsc_config import RSCConfig
+from advgame.agents.sa_recurrent_config import SARecurrentPPOConfig
 from advgame.agents.sb3 import PPOConfig, SACConfig, SAPPOConfig, TD3Config
 
 __all__ = [
@@ -22,8 +24,10 @@ __all__ = [
     "OMPOConfig",
     "PPOConfig",
     "RSCConfig",
+    "RecurrentPPOConfig",
     "SACConfig",
     "SAPPOConfig",
+    "SARecurrentPPOConfig",
     "TD3Config",
     "TeamLearner",
 ]

@@ -1,10 +1,12 @@
-"""Single-agent learner configs by algorithm name: SB3's PPO, SAC and TD3, SA-PPO, OMPO, DBC and RSC."""
+"""Single-agent learner configs by algorithm name: SB3's PPO, SAC and TD3, SA-PPO, OMPO, DBC, RSC and RecurrentPPO."""
 
 from __future__ import annotations
 
 from advgame.agents.dbc_config import DBCConfig
 from advgame.agents.ompo_config import OMPOConfig
+from advgame.agents.recurrent import RecurrentPPOConfig
 from advgame.agents.rsc_config import RSCConfig
+from advgame.agents.sa_recurrent_config import SARecurrentPPOConfig
 from advgame.agents.sb3 import PPOConfig, SACConfig, SAPPOConfig, TD3Config
 
 __all__ = ["LEARNERS"]
@@ -17,5 +19,7 @@ LEARNERS: dict[str, type] = {
     "ompo": OMPOConfig,
     "dbc": DBCConfig,
     "rsc": RSCConfig,
+    "recurrent-ppo": RecurrentPPOConfig,
+    "sa-recurrent-ppo": SARecurrentPPOConfig,
 }
 """Learner configs by algorithm name (`advgame.training.TrainConfig.protagonist_algo`)."""

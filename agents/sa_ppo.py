@@ -31,14 +31,36 @@ from torch.nn import functional as F
 
 from advgame.core.numpy_net import NumpyNet, sb3_modules
 
-__all__ = ["SAPPO", "sa_regulariser"]
+__all__ = ["SAPPO", "SASettings", "kl_rows", "pgd_start", "pgd_step", "sa_regulariser"]
+
+
+def kl_rows(reference: Any, dist: Any) -> torch.Tensor:
+    """``KL(reference ‖ dist)`` per row (a Gaussian: summed over action dimensions)."""
+    kl = torch.distributions.kl_divergence(reference, dist)
+    return kl.sum(-1) if kl.dim() > 1 else kl
 
 
 def _kl(policy: Any, obs: torch.Tensor, reference: Any) -> torch.Tensor:
-    """``KL(reference ‖ π(·|obs))`` per row (a Gaussian: summed over action dimensions)."""
-    dist = policy.get_distribution(obs).distribution
-    kl = torch.distributions.kl_divergence(reference, dist)
-    return kl.sum(-1) if kl.dim() > 1 else kl
+    """``KL(reference ‖ π(·|obs))`` per row."""
+    return kl_rows(reference, policy.get_distribution(obs).distribution)
+
+
+def pgd_start(
+    obs: torch.Tensor, eps: torch.Tensor, steps: int
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(step size, δ₀)`` of a PGD walk of `steps` steps in the L∞ ball of radius `eps`.
+
+    The walk can cross the ball 2.5 times (Madry et al.); it starts at a uniform random point.
+    """
+    step = 2.5 * eps / max(steps, 1)
+    return step, (torch.rand_like(obs) * 2 - 1) * eps
+
+
+def pgd_step(
+    delta: torch.Tensor, grad: torch.Tensor, step: torch.Tensor, eps: torch.Tensor
+) -> torch.Tensor:
+    """One signed ascent step on `delta`, projected back onto the L∞ ball of radius `eps`."""
+    return torch.max(torch.min(delta + step * grad.sign(), eps), -eps)
 
 
 def sa_regulariser(
@@ -65,8 +87,7 @@ def sa_regulariser(
         reference = type(clean)(clean.mean.detach(), clean.stddev.detach())
     if not torch.any(eps > 0):
         return torch.zeros((), dtype=obs.dtype), obs
-    step = 2.5 * eps / max(steps, 1)  # the walk can cross the ball 2.5 times (Madry et al.)
-    delta = (torch.rand_like(obs) * 2 - 1) * eps
+    step, delta = pgd_start(obs, eps, steps)
     walked = _numpy_walk(policy, obs, eps, step, steps, (low, high), delta)
     if walked is not None:
         delta = walked
@@ -74,7 +95,7 @@ def sa_regulariser(
         delta.requires_grad_(True)
         x = torch.clamp(obs + delta, low, high)
         (grad,) = torch.autograd.grad(_kl(policy, x, reference).sum(), delta)
-        delta = torch.max(torch.min(delta.detach() + step * grad.sign(), eps), -eps)
+        delta = pgd_step(delta.detach(), grad, step, eps)
     attacked = torch.clamp(obs + delta.detach(), low, high)
     return _kl(policy, attacked, reference).mean(), attacked
 
@@ -112,7 +133,39 @@ def _numpy_walk(
     return torch.as_tensor(d)
 
 
-class SAPPO(PPO):
+class SASettings:
+    """The SA learners' shared settings: ε now (ramped) and the inputs' clip range.
+
+    A mixin for an SB3 algorithm that stores the ``sa_*`` settings as attributes (`SAPPO`,
+    `advgame.agents.sa_recurrent.SARecurrentPPO`).
+    """
+
+    sa_eps: float
+    sa_ramp: float
+    sa_space: str
+    sa_total_steps: int
+    num_timesteps: int
+    observation_space: Any
+    get_vec_normalize_env: Any
+
+    def sa_radius(self) -> torch.Tensor:
+        """ε now (ramped), per policy-input dimension."""
+        frac = self.num_timesteps / max(self.sa_total_steps * self.sa_ramp, 1)
+        eps = self.sa_eps * min(1.0, frac) if self.sa_ramp > 0 else self.sa_eps
+        size = int(np.prod(self.observation_space.shape or ()))
+        radius = np.full(size, eps, dtype=np.float32)
+        rms = getattr(self.get_vec_normalize_env(), "obs_rms", None)
+        if self.sa_space == "raw" and rms is not None:
+            radius = radius / np.sqrt(rms.var + 1e-8).astype(np.float32)
+        return torch.as_tensor(radius)
+
+    def _clip_range(self) -> float:
+        """VecNormalize's ``clip_obs`` (inputs lie in ``[-clip, clip]``), inf without one."""
+        norm = self.get_vec_normalize_env()
+        return float(norm.clip_obs) if norm is not None else np.inf
+
+
+class SAPPO(SASettings, PPO):
     """SB3 PPO plus the state-adversarial regulariser (see the module doc).
 
     Args:
@@ -141,21 +194,6 @@ class SAPPO(PPO):
         self.sa_kappa, self.sa_eps, self.sa_steps = sa_kappa, sa_eps, sa_steps
         self.sa_ramp, self.sa_space, self.sa_total_steps = sa_ramp, sa_space, sa_total_steps
         super().__init__(*args, **kwargs)
-
-    def sa_radius(self) -> torch.Tensor:
-        """ε now (ramped), per policy-input dimension."""
-        frac = self.num_timesteps / max(self.sa_total_steps * self.sa_ramp, 1)
-        eps = self.sa_eps * min(1.0, frac) if self.sa_ramp > 0 else self.sa_eps
-        size = int(np.prod(self.observation_space.shape or ()))
-        radius = np.full(size, eps, dtype=np.float32)
-        rms = getattr(self.get_vec_normalize_env(), "obs_rms", None)
-        if self.sa_space == "raw" and rms is not None:
-            radius = radius / np.sqrt(rms.var + 1e-8).astype(np.float32)
-        return torch.as_tensor(radius)
-
-    def _clip_range(self) -> float:
-        norm = self.get_vec_normalize_env()
-        return float(norm.clip_obs) if norm is not None else np.inf
 
     def train(self) -> None:
         """One PPO update over the rollout buffer, with the SA regulariser on each minibatch."""

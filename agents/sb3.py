@@ -46,6 +46,8 @@ class _SB3Config:
 
     algo: ClassVar[str] = ""
     positive: ClassVar[tuple[str, ...]] = ("learning_rate",)
+    hidden_optional: ClassVar[bool] = False
+    """Whether `net_arch` may be empty (a recurrent policy reads its actions off the LSTM)."""
     learning_rate: float = 3e-4
     """Adam step size (actor and critic)."""
     lr_decay: bool = False
@@ -60,9 +62,15 @@ class _SB3Config:
             value = getattr(self, name)
             if not value > 0:
                 raise ConfigError(f"{type(self).__name__}.{name} must be > 0, got {value!r}.")
-        if not self.net_arch or not all(isinstance(h, int) and h > 0 for h in self.net_arch):
+        arch = self.net_arch
+        if (
+            not isinstance(arch, (tuple, list))
+            or not (arch or self.hidden_optional)
+            or not all(type(h) is int and h > 0 for h in arch)
+        ):
+            empty = " (or empty)" if self.hidden_optional else ""
             raise ConfigError(
-                f"{type(self).__name__}.net_arch must be positive ints, got {self.net_arch!r}."
+                f"{type(self).__name__}.net_arch must be positive ints{empty}, got {arch!r}."
             )
 
     def _check_ints(self, names: tuple[str, ...], minimum: int) -> None:

@@ -85,7 +85,7 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
         (
             "--checkpoint",
             "NAME=PATH[:ALGO]",
-            "an SB3 model as a protagonist (ALGO: ppo, sac, td3, ompo, dbc, rsc; default ppo)",
+            "an SB3 model as a protagonist (ALGO: ppo, sac, td3, ompo, dbc, rsc, recurrent-ppo; default ppo)",
         ),
         ("--normalizer", "NAME=PATH", "its VecNormalize pickle or obs-norm .npz"),
         ("--raw-obs", "NAME", "checkpoint NAME was trained on raw observations (no normalizer)"),

@@ -332,6 +332,13 @@ class _Placeholder:
         """The bound model's policy (a clear error before binding)."""
         if self.model is None:
             self._policy_input(None)
+        if hasattr(self.model.policy, "lstm_actor"):
+            raise ConfigError(
+                "Adversarial training on the current policy (PGD-AT) needs a feed-forward "
+                "learner: a recurrent learner's memory lives in its own rollout, out of the "
+                "attack's reach. Train with --protagonist-algo ppo or sa-ppo, or train a "
+                "recurrent protagonist against a learned adversary (--method atla-lstm)."
+            )
         if not hasattr(self.model.policy, "get_distribution"):
             raise ConfigError(
                 f"Adversarial training on the current policy needs an on-policy Gaussian learner "

@@ -55,6 +55,20 @@ METHODS: dict[str, dict[str, Any]] = {
         "train_budget_scale": 1.0,
         "protagonist_algo": "sa-ppo",
     },
+    "atla-lstm": {
+        "preset": "atla",
+        "learned": None,
+        "train_budget_scale": 1.0,
+        "protagonist_algo": "recurrent-ppo",
+        "adversary_algo": "recurrent-ppo",
+    },
+    "atla-lstm-sa": {
+        "preset": "atla",
+        "learned": None,
+        "train_budget_scale": 1.0,
+        "protagonist_algo": "sa-recurrent-ppo",
+        "adversary_algo": "recurrent-ppo",
+    },
     "sac": {
         "preset": "default",
         "learned": [],
@@ -96,7 +110,10 @@ METHODS: dict[str, dict[str, Any]] = {
 """Named starting points: plain PPO on the nominal task, ATLA (learned observation attack in
 normalized units), RARL (learned forces, trained at half the bound, tested at full), SA-PPO
 (nominal training with the state-adversarial regulariser, `advgame.agents.SAPPOConfig`),
-ATLA-SA (ATLA's alternation with an SA-PPO protagonist), PGD-AT (adversarial training on the
+ATLA-SA (ATLA's alternation with an SA-PPO protagonist), ATLA-LSTM (ATLA's alternation with an
+LSTM protagonist, `advgame.agents.RecurrentPPOConfig`), ATLA-LSTM-SA (the same with
+SA-PPO's regulariser on the LSTM protagonist, `advgame.agents.sa_recurrent`; both pair it with
+an LSTM adversary, as ATLA does), PGD-AT (adversarial training on the
 current policy: a MAD attack on the learner itself during every rollout), SAC and OMPO on raw observations and rewards, as OMPO's authors train (occupancy
 matching under shifting dynamics, `advgame.agents.ompo`; ``--preset ompo-nonstationary`` gives
 its shifting tasks), DBC on raw observations and rewards as its authors train (a bisimulation
@@ -124,6 +141,8 @@ class TrainConfig:
         "ompo",
         "dbc",
         "rsc",
+        "recurrent-ppo",
+        "sa-recurrent-ppo",
         "mappo",
         "ippo",
         "ppo-lag",
@@ -131,11 +150,11 @@ class TrainConfig:
         "crpo",
         "pcrpo",
     ] = "ppo"
-    """Protagonist learner: SB3 PPO/SAC/TD3, OMPO (SAC with OMPO's losses), DBC (SAC on a bisimulation encoder), RSC (SAC on causally augmented data), or SA-PPO (PPO with the state-adversarial
+    """Protagonist learner: SB3 PPO/SAC/TD3, OMPO (SAC with OMPO's losses), DBC (SAC on a bisimulation encoder), RSC (SAC on causally augmented data), RecurrentPPO (sb3-contrib's LSTM PPO), or SA-PPO (PPO with the state-adversarial
     regulariser) for one protagonist, MAPPO/IPPO for a team, or a constrained learner
     (PPO-Lagrangian, PID-Lagrangian, CRPO, PCRPO) on a safe scenario."""
-    adversary_algo: Literal["ppo", "sac"] = "ppo"
-    """Learner of each learned adversary."""
+    adversary_algo: Literal["ppo", "sac", "recurrent-ppo"] = "ppo"
+    """Learner of each learned adversary (``"recurrent-ppo"``: an LSTM adversary)."""
     protagonist_hparams: dict[str, Any] | None = None
     """Overrides of the protagonist learner config (e.g. {"n_steps": 512})."""
     adversary_hparams: dict[str, Any] | None = None

@@ -1,0 +1,193 @@
+"""A saved sb3-contrib ``RecurrentPPO`` (an LSTM policy) as a policy that carries its memory.
+
+`RecurrentSB3Policy` is `advgame.agents.sb3_policy.SB3Policy` with a hidden state: `reset`
+zeroes it at every episode start, and every `act` advances it on the observation the policy
+was given (under an observation attack, the perturbed one, as it would be in deployment).
+One `act` is one call of sb3-contrib's own recurrent forward pass, with the same operations
+as ``RecurrentPPO.predict``, so a model trained with plain sb3-contrib plays the same actions
+bit for bit (``tests/test_recurrent.py``).
+
+It is a `advgame.core.policy.WhiteBox` too: `action_mean` and `value` evaluate a batch of
+observations *with the state the policy carries now* (the state it will act with at this
+step), so a white-box attack computes the perturbation of step t with the victim's memory at
+t, without advancing it. The actor's state advances with every action; the value head's
+state (a separate critic LSTM, sb3-contrib's default) is only needed by attacks that read
+`value`, so the observations since the episode start are kept and the critic catches up on
+them when asked.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from advgame.agents.sb3_policy import SB3Policy
+from advgame.errors import ConfigError
+
+__all__ = ["RecurrentSB3Policy", "is_recurrent"]
+
+
+def is_recurrent(model: Any) -> bool:
+    """Whether `model`'s policy is an sb3-contrib recurrent (LSTM) policy."""
+    return hasattr(getattr(model, "policy", None), "lstm_actor")
+
+
+class RecurrentSB3Policy(SB3Policy):
+    """A ``RecurrentPPO`` model's LSTM policy with its memory, behind its frozen normalizer.
+
+    Args:
+        model: the ``RecurrentPPO`` model (its ``policy`` is used; nothing is trained).
+        obs_mean: the frozen normalizer's mean, or None if unnormalized.
+        obs_var: the frozen normalizer's variance, or None if unnormalized.
+        deterministic: act with the distribution's mode instead of sampling.
+        clip_obs: the normalizer's clip range (SB3 `VecNormalize` default 10).
+        epsilon: added to the variance before its square root.
+
+    """
+
+    recurrent = True
+    """Marks a policy whose action depends on what it saw before in the episode."""
+
+    def __init__(
+        self,
+        model: Any,
+        obs_mean: np.ndarray | None = None,
+        obs_var: np.ndarray | None = None,
+        deterministic: bool = True,
+        clip_obs: float = 10.0,
+        epsilon: float = 1e-8,
+    ) -> None:
+        if not is_recurrent(model):
+            raise ConfigError(
+                f"RecurrentSB3Policy needs an sb3-contrib RecurrentPPO model, got "
+                f"{type(model).__name__}; use SB3Policy for feed-forward policies."
+            )
+        super().__init__(model, obs_mean, obs_var, deterministic, clip_obs, epsilon)
+        self._actor: tuple[Any, Any] = self._zeros()
+        self._critic: tuple[Any, Any] = self._zeros()
+        self._seen: list[Any] = []  # policy inputs since the episode start (critic catch-up)
+        self._critic_at = 0
+
+    def _zeros(self) -> tuple[Any, Any]:
+        import torch
+
+        shape = self.model.policy.lstm_hidden_state_shape  # (layers, 1, hidden)
+        return torch.zeros(shape), torch.zeros(shape)
+
+    # -- playing -------------------------------------------------------------------------------
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode: zero the memory (and seed sampling, as `SB3Policy.reset`)."""
+        super().reset(seed)
+        self._actor, self._critic = self._zeros(), self._zeros()
+        self._seen, self._critic_at = [], 0
+
+    @property
+    def batch_key(self) -> tuple | None:
+        """None: each copy carries its own memory, so copies are asked one at a time.
+
+        (A batched LSTM pass would differ from the one-row pass in the last bit, and a chaotic
+        simulator turns that into another episode.)
+        """
+        return None
+
+    def act(self, observation: Any) -> Any:
+        """The action for one raw observation; the memory then holds it."""
+        if isinstance(observation, dict):
+            raise ConfigError(
+                "Recurrent policies here take flat (Box) observations, not Dict ones; train "
+                "goal-conditioned protagonists with a feed-forward learner."
+            )
+        return self._step(self._normalize(np.asarray(observation))[None])[0]
+
+    def act_batch(self, observations: Any) -> Any:
+        """Refused: one memory cannot act for a batch of different episodes."""
+        raise ConfigError(
+            "A recurrent policy carries one episode's memory; call act() on each copy (its "
+            "batch_key is None, so advgame's batched play never calls act_batch)."
+        )
+
+    def _step(self, obs: np.ndarray) -> Any:
+        """``RecurrentPPO.predict``'s operations for one normalized row, advancing the memory."""
+        import torch
+
+        self._prepare()
+        policy = self.model.policy
+        x = torch.as_tensor(obs)
+        with torch.no_grad():
+            actions, self._actor = policy._predict(
+                x,
+                lstm_states=self._actor,
+                episode_starts=torch.zeros(1),
+                deterministic=self.deterministic,
+            )
+        self._seen.append(x)
+        out = actions.cpu().numpy().reshape((-1, *self.model.action_space.shape))
+        if self._box is not None:
+            out = policy.unscale_action(out) if self._squash else np.clip(out, *self._box)
+        return out
+
+    # -- white-box access: the carried state, never advanced here -------------------------------
+    @staticmethod
+    def _expand(state: tuple[Any, Any], n: int) -> tuple[Any, Any]:
+        return state[0].expand(-1, n, -1).contiguous(), state[1].expand(-1, n, -1).contiguous()
+
+    def hidden_state(self) -> dict[str, tuple[Any, Any]]:
+        """Copies of the memory the policy acts with next: ``{"actor": (h, c), "critic": (h, c)}``.
+
+        Each tensor is ``[layers, 1, hidden]``; the critic's is brought up to date first.
+        """
+        critic = self._critic_state()
+        return {
+            "actor": (self._actor[0].clone(), self._actor[1].clone()),
+            "critic": (critic[0].clone(), critic[1].clone()),
+        }
+
+    def action_mean(self, obs: Any) -> Any:
+        """The Gaussian's mean at each row of `obs`, each row with the current actor memory."""
+        import torch
+
+        x = self._features(obs)
+        dist, _ = self.model.policy.get_distribution(
+            x, self._expand(self._actor, len(x)), torch.zeros(len(x))
+        )
+        inner = dist.distribution
+        if not hasattr(inner, "mean") or not hasattr(inner, "stddev"):
+            raise ConfigError(
+                f"White-box attacks need a Gaussian policy; this one acts through {inner}."
+            )
+        return inner.mean
+
+    def value(self, obs: Any) -> Any:
+        """``V(obs)`` per row, each row with the value head's current memory."""
+        import torch
+
+        x = self._features(obs)
+        state = self._expand(self._critic_state(), len(x))
+        return self.model.policy.predict_values(x, state, torch.zeros(len(x))).squeeze(-1)
+
+    def q_value(self, obs: Any, action: Any) -> Any:
+        """None: a recurrent PPO has no Q critic."""
+        return None
+
+    def numpy_net(self, head: str) -> None:
+        """None: attacks walk a recurrent policy through torch (no NumPy copy of an LSTM)."""
+        return None
+
+    def _critic_state(self) -> tuple[Any, Any]:
+        """The value head's memory now: it catches up on the inputs seen since it last did."""
+        import torch
+
+        policy = self.model.policy
+        if policy.shared_lstm:
+            return self._actor
+        if policy.lstm_critic is None or self._critic_at == len(self._seen):
+            return self._critic
+        from stable_baselines3.common.policies import BaseModel
+
+        rows = torch.cat(self._seen[self._critic_at :])
+        with torch.no_grad():  # BaseModel's: what RecurrentActorCriticPolicy.predict_values runs
+            features = BaseModel.extract_features(policy, rows, policy.vf_features_extractor)
+            _, self._critic = policy.lstm_critic(features[:, None, :], self._critic)
+        self._critic_at = len(self._seen)
+        return self._critic
