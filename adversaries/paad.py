@@ -24,6 +24,12 @@ the attack's own threat model, `DirectorEnv`) or loads one from a cache folder, 
 fingerprint of the policy, the scenario, the disruptor and the attack's settings. Evaluation
 attaches every column to every row once in the main process before any job runs, so a table
 trains each director once and its workers load it.
+
+A recurrent victim (an LSTM policy) is walked with the memory it carries at each step, as every
+white-box attack walks it; the director trains in views that reset that memory at each episode
+start and advance it on the perturbed observations, and its cache key probes the memory too
+(`advgame.adversaries.whitebox.victim_fingerprint`). The director itself sees the true state
+only (a feed-forward PPO), where ATLA's learned attack on an LSTM agent is an LSTM.
 """
 
 from __future__ import annotations

@@ -75,12 +75,23 @@ class DirectorEnv(VecEnvWrapper):
             pol.direction = np.clip(d.reshape(-1), -1.0, 1.0)
         # the base walk, not `_PAADPolicy.act_group`: the directions are the learner's actions,
         # and the walk reads each game's true observation itself
-        blank = [None] * len(self.attackers)
-        self.venv.step_async(WhiteBoxAttackPolicy.act_group(self.attackers, blank))
+        self.venv.step_async(_walk_all(self.attackers))
 
     def step_wait(self) -> Any:
         """The views' step results."""
         return self.venv.step_wait()
+
+
+def _walk_all(attackers: list[Any]) -> np.ndarray:
+    """Every view's perturbation: one walk when the views' victims share a ``batch_key``.
+
+    Otherwise (a recurrent victim, whose key is None: each view's copy carries its own
+    memory) each view walks alone, with its own victim.
+    """
+    keys = {a.batch_key for a in attackers}
+    if len(attackers) > 1 and (None in keys or len(keys) > 1):
+        return np.concatenate([WhiteBoxAttackPolicy.act_group([a], [None]) for a in attackers])
+    return WhiteBoxAttackPolicy.act_group(attackers, [None] * len(attackers))
 
 
 def train_director(

@@ -22,6 +22,11 @@ the scenario and the attack's settings. `advgame.evaluation.evaluate` asks every
 every row in the main process before any job runs (`advgame.evaluation.table.applicable`), which
 attaches the attack once per protagonist: the critic is learned there, once, and every worker
 and episode loads it.
+
+A recurrent victim (an LSTM policy) plays the data collection with its memory (reset at each
+episode start, advanced at every step, ``μ`` read with the memory of that step), and the attack
+walks ``π(s + δ)`` with the memory it carries at the attacked step. ``Q^π(s, a)`` itself sees
+the true state only, as the MLP critic of ATLA's Robust Sarsa on its LSTM agents does.
 """
 
 from __future__ import annotations

@@ -2,7 +2,8 @@
 
 `collect` plays the policy (its deterministic actions) in the scenario's nominal game and keeps
 ``(s, μ(s), r, s', μ(s'), done)`` with ``μ`` the policy's mean action *before* the action
-space's clip, which is what the attack differentiates. `fit_sarsa` fits a small network to the
+space's clip, which is what the attack differentiates (a recurrent policy's with its memory
+of the episode at each step). `fit_sarsa` fits a small network to the
 Sarsa target with the action-robustness term of Zhang et al. 2020 (see
 `adversaries.robust_sarsa`).
 """
@@ -100,9 +101,13 @@ class QNetwork:
 def collect(
     scenario: str, agent: str, victim: Any, samples: int, seed: int
 ) -> dict[str, np.ndarray]:
-    """Play `victim` as `agent` in `scenario`'s nominal game for `samples` act moves."""
-    import torch
+    """Play `victim` as `agent` in `scenario`'s nominal game for `samples` act moves.
 
+    Each transition keeps ``μ(s)`` and ``μ(s')`` as the victim takes them then: a recurrent
+    victim is reset at every episode start and asked with the memory it carries at that
+    step (``μ(s')`` with the memory after acting on ``s``), so its ``Q^π`` is learned on the
+    actions it really plays.
+    """
     from advgame.core.registry import make
 
     game = make(scenario, disruptors={})
@@ -111,45 +116,52 @@ def collect(
         raise ConfigError(
             f"Robust Sarsa learns Q of continuous actions; {agent!r} acts in {space}."
         )
-    obs_l: list[np.ndarray] = []
-    act_l: list[np.ndarray] = []
-    next_l: list[np.ndarray] = []
-    rew_l: list[float] = []
-    cost_l: list[float] = []
-    done_l: list[bool] = []
-    episode = 0
+    rows: dict[str, list[Any]] = {k: [] for k in ("obs", "act", "rew", "cost", "done", "next")}
+    next_act: list[np.ndarray] = []
+    episode, pending = 0, False  # pending: the last row's μ(s') is the next row's μ(s)
     try:
         game.reset(seed=seed)
+        victim.reset(None)  # unseeded: a sampling victim's torch generator stays as it was
         obs = np.asarray(game.observe(agent), dtype=np.float32)
-        while len(obs_l) < samples:
-            with torch.no_grad():
-                mean = victim.action_mean(torch.as_tensor(obs[None])).numpy()[0]
-            action = victim.act(obs)
-            move = game.play({agent: action})
-            obs_l.append(obs)
-            act_l.append(mean)
-            rew_l.append(move.reward)
-            cost_l.append(move.cost)
-            done_l.append(move.terminated)
-            if move.terminated or move.truncated:
+        while len(rows["obs"]) < samples:
+            mean = _mean(victim, obs)
+            if pending:
+                next_act.append(mean)
+            move = game.play({agent: victim.act(obs)})
+            row = (obs, mean, move.reward, move.cost, move.terminated)
+            for key, value in zip(("obs", "act", "rew", "cost", "done"), row, strict=True):
+                rows[key].append(value)
+            obs = np.asarray(game.observe(agent), dtype=np.float32)
+            rows["next"].append(obs)
+            pending = not (move.terminated or move.truncated)
+            if not pending:  # the successor's action with this episode's memory, then a new one
+                next_act.append(_mean(victim, obs))
                 episode += 1
-                next_l.append(np.asarray(game.observe(agent), dtype=np.float32))
                 game.reset(seed=seed + episode)
+                victim.reset(None)
                 obs = np.asarray(game.observe(agent), dtype=np.float32)
-            else:
-                obs = np.asarray(game.observe(agent), dtype=np.float32)
-                next_l.append(obs)
+        if pending:
+            next_act.append(_mean(victim, obs))
     finally:
         game.close()
     return {
-        "obs": np.asarray(obs_l),
-        "act": np.asarray(act_l, dtype=np.float32),
-        "rew": np.asarray(rew_l, dtype=np.float32),
-        "cost": np.asarray(cost_l, dtype=np.float32),
-        "done": np.asarray(done_l, dtype=np.float32),
-        "next": np.asarray(next_l),
+        "obs": np.asarray(rows["obs"]),
+        "act": np.asarray(rows["act"], dtype=np.float32),
+        "rew": np.asarray(rows["rew"], dtype=np.float32),
+        "cost": np.asarray(rows["cost"], dtype=np.float32),
+        "done": np.asarray(rows["done"], dtype=np.float32),
+        "next": np.asarray(rows["next"]),
+        "next_act": np.asarray(next_act, dtype=np.float32),
         "act_range": np.asarray((space.high - space.low) / 2, dtype=np.float32),
     }
+
+
+def _mean(victim: Any, obs: np.ndarray) -> np.ndarray:
+    """The victim's mean action at one observation (with the memory it carries now)."""
+    import torch
+
+    with torch.no_grad():
+        return victim.action_mean(torch.as_tensor(obs[None])).numpy()[0]
 
 
 def fit_sarsa(
@@ -178,8 +190,7 @@ def fit_sarsa(
 
     torch.manual_seed(seed)
     data = collect(scenario, agent, victim, samples, seed)
-    with torch.no_grad():  # the successor's action, as the policy takes it
-        next_act = victim.action_mean(torch.as_tensor(data["next"])).numpy()
+    next_act = data.pop("next_act")  # the successor's action, as the policy takes it
     act_range = data.pop("act_range")
     cost = data.pop("cost")
     if signal == "cost":  # Q_c^π: the same Sarsa fit on the true cost

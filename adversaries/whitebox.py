@@ -68,16 +68,45 @@ def victim_fingerprint(victim: WhiteBox, size: int) -> list[bytes]:
     """The victim's mean actions on fixed probe observations of `size`, and its action std.
 
     What attacks that learn per victim (Robust Sarsa's critic, PA-AD's director) key their
-    cache with: two policies with these equal act alike on the probes.
+    cache with: two policies with these equal act alike on the probes. A recurrent victim (one
+    with ``recurrent = True``: its action depends on its memory) is probed along the probes
+    played as one episode from a zeroed memory (`_recurrent_probe`), so the key covers how its
+    memory moves, does not depend on where in an episode it is asked, and is tagged so that it
+    never equals a feed-forward policy's.
     """
     import torch
 
     from advgame.adversaries.sarsa_critic import probe_observations
 
+    probes = probe_observations(size)
     with torch.no_grad():
-        actions = victim.action_mean(probe_observations(size)).numpy().tobytes()
         std = victim.action_std()
-    return [actions, b"" if std is None else std.numpy().tobytes()]
+        if getattr(victim, "recurrent", False):
+            head, actions = [b"recurrent"], _recurrent_probe(victim, probes)
+        else:
+            head, actions = [], victim.action_mean(probes).numpy().tobytes()
+    return [*head, actions, b"" if std is None else std.numpy().tobytes()]
+
+
+def _recurrent_probe(victim: Any, probes: torch.Tensor) -> bytes:
+    """The mean actions of a recurrent victim along `probes` played in order from a zero memory.
+
+    A shallow copy plays them (``reset`` gives it its own zeroed memory, deterministic
+    actions leave torch's generator alone), so the victim's own memory is untouched.
+    """
+    import copy
+
+    inner = victim
+    while getattr(type(inner), "wrapped", None) is not None:  # a mixture: its member now
+        inner = inner.wrapped
+    probe = copy.copy(inner)
+    probe.deterministic = True
+    probe.reset(None)
+    rows = []
+    for row in probes:
+        rows.append(probe.action_mean(row[None]).numpy())
+        probe.act(row.numpy())
+    return np.concatenate(rows).tobytes()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -6,6 +6,12 @@ observation adversary. It binds to the game and its victims, and in each sense m
 random starts inside the budget: every game of one `batch_key` in one walk over ``[N, k]``,
 through the victim's `NumpyNet` where there is one (no torch per step), else through torch's
 autograd. The spec says what the walk maximises; this module says how it walks.
+
+A recurrent victim (an LSTM policy, `advgame.agents.recurrent_policy.RecurrentSB3Policy`) is
+walked with the memory it carries at the sense move of step t, before it acts on the perturbed
+observation (so the perturbation of step t is computed from the memory of step t, as ATLA's
+attacks are, and the victim's memory then advances on what it was shown). Its ``batch_key`` is
+None and it has no `NumpyNet`, so each game walks alone, through torch.
 """
 
 from __future__ import annotations
@@ -105,6 +111,13 @@ class WhiteBoxAttackPolicy:
                     f"{target!r} observes a Dict. White-box attacks do not cover Dict "
                     "observations (goal-conditioned tasks); use random, scheduled or learned "
                     "observation adversaries there."
+                )
+            if self.disruptor.timing == "stale" and getattr(victim, "recurrent", False):
+                raise ConfigError(
+                    f"{type(self.spec).__name__} on {self.agent!r} has timing='stale': it moves "
+                    f"with {target!r}, whose policy is recurrent, so the memory the walk reads "
+                    "would depend on which of the two is asked first. Attack a recurrent policy "
+                    "with timing='sense' (the faithful order)."
                 )
             n = int(np.prod(space.shape))
             with torch.no_grad():
