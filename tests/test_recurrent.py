@@ -253,3 +253,15 @@ def test_atla_lstm_trains_resumes_and_is_evaluated_from_the_cli(
     cells = {r["adversary"] for r in rows(out)}
     assert {"nominal", "attack random", "attack mad", "attack critic"} <= cells
     assert all(np.isfinite(float(r["true_return"])) for r in rows(out))
+
+
+def test_psro_trains_and_plays_lstm_best_responses(tmp_path: Path) -> None:
+    small = json.dumps({"n_steps": 64, "batch_size": 64, "lstm_hidden_size": 8})
+    args = ["psro", "--run-dir", str(tmp_path / "psro"), "--scenario", "Hopper-v5"]
+    args += ["--preset", "atla", "--iterations", "1", "--protagonist-steps", "64"]
+    args += ["--adversary-steps", "64", "--protagonist-algo", "recurrent-ppo"]
+    args += ["--adversary-algo", "recurrent-ppo", "--max-episode-steps", "50", "--eval-seeds", "1"]
+    args += ["--set", f"protagonist_hparams={small}", "--set", f"adversary_hparams={small}"]
+    assert main(args) == 0
+    text = (tmp_path / "psro" / "population.json").read_text()
+    assert '"algo": "recurrent-ppo"' in text and '"algo": "ppo"' not in text

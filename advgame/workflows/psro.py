@@ -62,10 +62,10 @@ class PSROConfig:
     """Steps of each protagonist best response."""
     adversary_steps: int = 2048
     """Steps of each adversary best response."""
-    protagonist_algo: Literal["ppo", "sac", "td3"] = "ppo"
-    """Protagonist learner (SB3)."""
-    adversary_algo: Literal["ppo", "sac"] = "ppo"
-    """Adversary learner (SB3)."""
+    protagonist_algo: Literal["ppo", "sac", "td3", "recurrent-ppo"] = "ppo"
+    """Protagonist learner (SB3, or sb3-contrib's LSTM PPO)."""
+    adversary_algo: Literal["ppo", "sac", "recurrent-ppo"] = "ppo"
+    """Adversary learner (SB3, or sb3-contrib's LSTM PPO)."""
     protagonist_hparams: dict[str, Any] | None = None
     """Overrides of the protagonist learner config (e.g. {"n_steps": 512})."""
     adversary_hparams: dict[str, Any] | None = None
