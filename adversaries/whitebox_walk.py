@@ -11,7 +11,8 @@ A recurrent victim (an LSTM policy, `advgame.agents.recurrent_policy.RecurrentSB
 walked with the memory it carries at the sense move of step t, before it acts on the perturbed
 observation (so the perturbation of step t is computed from the memory of step t, as ATLA's
 attacks are, and the victim's memory then advances on what it was shown). Its ``batch_key`` is
-None and it has no `NumpyNet`, so each game walks alone, through torch.
+None, so each game walks alone, through its `NumpyNet` placed at the memory it carries now
+(`advgame.core.numpy_lstm`).
 """
 
 from __future__ import annotations

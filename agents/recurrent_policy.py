@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 
 from advgame.agents.sb3_policy import SB3Policy
+from advgame.core.numpy_lstm import recurrent_modules
+from advgame.core.numpy_net import NumpyNet
 from advgame.errors import ConfigError
 
 __all__ = ["RecurrentSB3Policy", "is_recurrent"]
@@ -170,9 +172,31 @@ class RecurrentSB3Policy(SB3Policy):
         """None: a recurrent PPO has no Q critic."""
         return None
 
-    def numpy_net(self, head: str) -> None:
-        """None: attacks walk a recurrent policy through torch (no NumPy copy of an LSTM)."""
-        return None
+    def numpy_net(self, head: str) -> NumpyNet | None:
+        """The mean (``"mean"``) or value head (``"value"``) at the memory carried now, in NumPy.
+
+        A `NumpyNet` of normalizer, one LSTM step at the head's current memory (the actor's;
+        the critic's, caught up first; none for a critic without an LSTM), MLP and output
+        layer: the same function as `action_mean` or `value`, for white-box attacks to walk
+        without torch. A new net for every call (the weights copied once, per weights stamp;
+        only the memory's bias is computed), so ask again after the memory moves. None where
+        not covered (`advgame.core.numpy_lstm.recurrent_modules`; more than one LSTM layer).
+
+        Unlike torch's `value` of a shared LSTM (sb3-contrib detaches the value's LSTM
+        output), its input gradient is the value's true gradient.
+        """
+        picked = recurrent_modules(self.model.policy, head)
+        if picked is None:
+            return None
+        modules, memory = picked
+        norm = None
+        if self.mean is not None and self.std is not None:
+            norm = (self.mean, self.std, self.clip_obs)
+        net = self._numpy.get(head, modules, norm)
+        if net is None or memory is None:
+            return net
+        h, c = self._actor if memory == "actor" else self._critic_state()
+        return net.at_memory(h.numpy().reshape(-1), c.numpy().reshape(-1))
 
     def _critic_state(self) -> tuple[Any, Any]:
         """The value head's memory now: it catches up on the inputs seen since it last did."""

@@ -19,7 +19,8 @@ episodes through `evaluate`, in the same interleaved rounds:
 
 * ``lstm nominal``: the undisrupted game;
 * ``lstm mad``: `MADAttack()` in preset ``default``; each game walks alone (a recurrent
-  victim carries its own memory: no batched walk), through torch (no NumPy LSTM).
+  victim carries its own memory: no batched walk), through the NumPy LSTM step at the carried
+  memory (`advgame.core.numpy_lstm`); ``lstm mad torch`` walks through torch instead.
 
 Reported likewise, with the ratio ``lstm mad`` / ``lstm nominal`` against the same goal.
 Run: ``python benchmarks/bench_attack.py [--rounds 3] [--episodes 16] [--train 20000]
@@ -37,6 +38,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from calibrate import line, step_us
 
 from advgame.adversaries import MADAttack
 from advgame.evaluation import (
@@ -124,18 +126,31 @@ def lstm_rates(folder: Path, episodes: int, rounds: int) -> dict[str, list[float
     paths = {
         "lstm nominal": lambda: evaluate(nominal, progress=False).rows,
         "lstm mad": lambda: evaluate(attacked, progress=False).rows,
+        "lstm mad torch": lambda: _through_torch(lambda: evaluate(attacked, progress=False).rows),
     }
     return _rates(paths, rounds)[0]
+
+
+def _through_torch(fn: Any) -> Any:
+    """`fn()` with the recurrent victim's NumPy copy withheld: the walk goes through torch."""
+    from advgame.agents.recurrent_policy import RecurrentSB3Policy
+
+    saved = RecurrentSB3Policy.numpy_net
+    RecurrentSB3Policy.numpy_net = lambda self, head: None  # type: ignore[method-assign]
+    try:
+        return fn()
+    finally:
+        RecurrentSB3Policy.numpy_net = saved  # type: ignore[method-assign]
 
 
 def _report(title: str, rates: dict[str, list[float]], attacked: str) -> None:
     """Print one table: each path's median steps/s and its ratio to the first (nominal)."""
     nom = float(np.median(next(iter(rates.values()))))
     print(title)
-    print(f"{'path':<12} {'steps/s':>9} {'/ nominal':>10}")
+    print(f"{'path':<15} {'steps/s':>9} {'/ nominal':>10}")
     for name, values in rates.items():
         med = float(np.median(values))
-        print(f"{name:<12} {med:>9.0f} {med / nom:>10.3f}")
+        print(f"{name:<15} {med:>9.0f} {med / nom:>10.3f}")
     ok = np.median(rates[attacked]) / nom >= GOAL
     print(f"goal {attacked} / nominal >= {GOAL}: {'met' if ok else 'not met'}")
 
@@ -153,6 +168,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.smoke:
         args.rounds, args.episodes, args.train, args.lstm_episodes = 1, 2, 256, 1
     torch.set_num_threads(1)
+    calibration = step_us(steps=2_000 if args.smoke else 5_000, repeats=3)
+    print(f"before: {line(calibration, 5_000, 3)}")
     with tempfile.TemporaryDirectory() as tmp:
         if "ppo" in args.victims:
             rates = ppo_rates(Path(tmp), args.episodes, args.rounds, args.train)
@@ -162,6 +179,7 @@ def main(argv: list[str] | None = None) -> None:
             rates = lstm_rates(Path(tmp), args.lstm_episodes, args.rounds)
             title = f"{LSTM_ENV}, RecurrentPPO (64 LSTM units), {args.lstm_episodes} episodes, "
             _report(title + f"{args.rounds} rounds, one worker", rates, "lstm mad")
+    print(f"after: {line(step_us(steps=2_000 if args.smoke else 5_000, repeats=3), 5_000, 3)}")
 
 
 if __name__ == "__main__":

@@ -8,7 +8,9 @@ bookkeeping costs several times the arithmetic. `NumpyNet` is the same network a
 in the input.
 
 It covers what SB3's default policies are made of: the observation normalizer (shift, scale,
-clip, as `VecNormalize` applies it), ``nn.Linear``, ``nn.Tanh`` and ``nn.ReLU``, in float32.
+clip, as `VecNormalize` applies it), ``nn.Linear``, ``nn.Tanh`` and ``nn.ReLU``, in float32;
+and, first after the normalizer, one step of a one-layer ``nn.LSTM`` at a frozen memory
+(`advgame.core.numpy_lstm.LSTMCell`, sb3-contrib's recurrent policies; `NumpyNet.at_memory`).
 Every linear layer runs as a stack of one-row products (``[n, 1, in] @ W``), the shape a lone
 row has, so row ``i`` of a batch is computed exactly as that row alone: a lockstep group of
 attacked games walks as each game would alone. `NumpyNet.of` probes that once per network
@@ -24,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.numpy_lstm import LSTMCell
 from advgame.core.policy import plain_gaussian
 
 __all__ = ["NetCache", "NumpyNet", "sb3_modules", "weights_stamp"]
@@ -32,14 +35,15 @@ _PROBE_SIZES = (2, 3, 8, 33)
 
 
 class NumpyNet:
-    """A frozen copy of a Linear/Tanh/ReLU stack, behind an optional input normalizer.
+    """A frozen copy of a Linear/Tanh/ReLU stack (maybe an LSTM step first), behind a normalizer.
 
     Build it with `NumpyNet.of`. ``forward(x)`` for a float32 batch ``[n, in]`` returns the
     output ``[n, out]`` and a tape; ``backward(tape, g)`` returns ``g``'s vector-Jacobian
     product in ``x`` (``[n, in]``): the gradient of ``(output * g).sum()``.
 
     Args:
-        layers: ``("linear", W [in, out], b [out])``, ``("tanh",)`` or ``("relu",)`` in order.
+        layers: ``("linear", W [in, out], b [out])``, ``("tanh",)``, ``("relu",)`` or
+            ``("lstm", LSTMCell)`` (the first layer only), in order.
         normalizer: ``(mean, std, clip)``: the input becomes ``clip((x - mean) / std)`` first
             (float32, as advgame's policies normalize for the network), or None.
 
@@ -59,8 +63,13 @@ class NumpyNet:
                 self._layers.append(("linear", w, b, np.ascontiguousarray(w.T)))
             elif layer[0] in ("tanh", "relu"):
                 self._layers.append((layer[0], None, None, None))
+            elif layer[0] == "lstm" and not self._layers:
+                self._layers.append(("lstm", layer[1], None, None))
             else:
-                raise ValueError(f"NumpyNet covers linear, tanh and relu layers, not {layer[0]!r}.")
+                raise ValueError(
+                    f"NumpyNet covers linear, tanh and relu layers and a first lstm layer, not "
+                    f"{layer[0]!r} at position {len(self._layers)}."
+                )
         self._norm = _float32_normalizer(normalizer)
 
     def behind(self, normalizer: tuple[np.ndarray, np.ndarray, float] | None) -> NumpyNet:
@@ -72,6 +81,19 @@ class NumpyNet:
         net._norm = _float32_normalizer(normalizer)
         return net
 
+    def at_memory(self, h: np.ndarray, c: np.ndarray) -> NumpyNet:
+        """The same net (weights shared) with its LSTM step at memory ``h, c`` (each ``[H]``).
+
+        The memory enters element-wise (a bias and ``c``), so a batched row is still the row
+        alone: no new probe. Raises ValueError for a net without an LSTM step.
+        """
+        kind, cell, _, _ = self._layers[0]
+        if kind != "lstm":
+            raise ValueError("at_memory needs a NumpyNet that starts with an LSTM step.")
+        net = copy.copy(self)
+        net._layers = [("lstm", cell.at(h, c), None, None), *self._layers[1:]]
+        return net
+
     @classmethod
     def of(
         cls,
@@ -81,7 +103,8 @@ class NumpyNet:
     ) -> NumpyNet | None:
         """The NumPy copy of torch `modules` (layers and ``nn.Sequential`` blocks, in order), or None.
 
-        None when a module is not ``nn.Linear``, ``nn.Tanh``, ``nn.ReLU`` or ``nn.Flatten``, or
+        None when a module is not ``nn.Linear``, ``nn.Tanh``, ``nn.ReLU``, ``nn.Flatten`` or a
+        first one-layer ``nn.LSTM`` (copied at the zero memory: `at_memory` moves it), or
         when the probe finds a batched row differs from the same row alone in any bit
         (``probe=False`` skips it: for a copy whose rows need not match lone rows, such as a
         learner's minibatch).
@@ -97,9 +120,11 @@ class NumpyNet:
                     layers.append(("linear", layer.weight.detach().numpy().T, b))
                 elif name in ("Tanh", "ReLU"):
                     layers.append((name.lower(),))
+                elif name == "LSTM" and not layers and (cell := LSTMCell.of(layer)) is not None:
+                    layers.append(("lstm", cell))
                 elif name not in ("Flatten", "Identity"):
                     return None
-        if not layers or layers[0][0] != "linear":
+        if not layers or layers[0][0] not in ("linear", "lstm"):
             return None
         net = cls(layers, normalizer)
         return net if not probe or net._probe() else None
@@ -107,9 +132,9 @@ class NumpyNet:
     @property
     def in_features(self) -> int:
         """The width of the input."""
-        first = self._layers[0][1]
-        assert first is not None  # `of` and the constructor start with a linear layer
-        return int(first.shape[0])
+        kind, first, _, _ = self._layers[0]
+        assert first is not None  # `of` and the constructor start with a linear or lstm layer
+        return int(first.in_features if kind == "lstm" else first.shape[0])
 
     def forward(self, x: np.ndarray) -> tuple[np.ndarray, list[Any]]:
         """The output ``[n, out]`` for a float32 batch ``[n, in]``, and the tape for `backward`."""
@@ -124,6 +149,9 @@ class NumpyNet:
         for kind, w, b, _ in self._layers:
             if kind == "linear":
                 h = np.matmul(h, w) + b
+            elif kind == "lstm":
+                h, saved = w.forward(h)
+                tape.append(saved)
             elif kind == "tanh":
                 h = np.tanh(h)
                 tape.append(h)
@@ -136,9 +164,12 @@ class NumpyNet:
         """The gradient in the input of ``(output * grad).sum()`` (`forward`'s `tape`)."""
         g = np.asarray(grad, dtype=np.float32)[:, None, :]
         saved = len(tape)
-        for kind, _, _, wt in reversed(self._layers):
+        for kind, w, _, wt in reversed(self._layers):
             if kind == "linear":
                 g = np.matmul(g, wt)
+            elif kind == "lstm":
+                saved -= 1
+                g = w.backward(tape[saved], g)
             elif kind == "tanh":
                 saved -= 1
                 y = tape[saved]

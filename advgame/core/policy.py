@@ -74,7 +74,8 @@ class WhiteBox(Protocol):
     Optionally a policy also has ``numpy_net(head)``: ``"mean"`` (`action_mean`) or ``"value"``
     (`value`, for a policy without a Q critic) as an `advgame.core.numpy_net.NumpyNet`, the same
     function in NumPy with its input gradient, or None. White-box attacks walk through it where
-    it is there (SB3's PPO, saved MAPPO/IPPO actors) and through torch otherwise.
+    it is there (SB3's PPO, sb3-contrib's RecurrentPPO at its carried memory, saved MAPPO/IPPO
+    actors) and through torch otherwise.
     """
 
     def action_mean(self, obs: Any) -> Any:
