@@ -8,7 +8,9 @@ per rollout of ``--n-steps`` steps on each of ``--n-envs`` envs), in interleaved
 * ``lstm b64``: `advgame.agents.RecurrentPPOConfig`'s model (sb3-contrib ``RecurrentPPO``, one
   64-unit LSTM per network read out linearly, ATLA's LSTM policy), minibatch 64;
 * ``lstm bN``: the same with a minibatch of ``--big-batch`` steps (whole stretches of
-  sequences per gradient step, nearer ATLA's full-batch LSTM update; fewer, longer passes).
+  sequences per gradient step, nearer ATLA's full-batch LSTM update; fewer, longer passes);
+* ``lstm-sa bN``: that with the SA regulariser (`advgame.agents.SARecurrentPPOConfig`: κ 0.3,
+  2 PGD steps, ε 0.075 from the first step): ATLA-LSTM-SA's protagonist.
 
 Reported: the median steps per second of each and each one's ratio to ``ppo`` per round
 (median and range), with the machine calibration (a raw HalfCheetah-v5 step) before and
@@ -29,8 +31,7 @@ import torch
 from calibrate import line, step_us
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-from advgame.agents import PPOConfig
-from advgame.agents.recurrent import RecurrentPPOConfig
+from advgame.agents import PPOConfig, RecurrentPPOConfig, SARecurrentPPOConfig
 
 ENV = "Hopper-v5"
 
@@ -65,6 +66,9 @@ def main() -> None:
         f"lstm b{args.big_batch}": _model(
             RecurrentPPOConfig(**update, batch_size=args.big_batch), args.n_envs
         ),
+        f"lstm-sa b{args.big_batch}": _model(
+            SARecurrentPPOConfig(**update, batch_size=args.big_batch, sa_ramp=0.0), args.n_envs
+        ),
     }
     for model in variants.values():  # warm up: imports, first rollout and update
         _timed(model, args.n_steps * args.n_envs)
@@ -76,11 +80,11 @@ def main() -> None:
     print(f"{ENV}, {args.n_envs} envs x {args.n_steps} steps per rollout, 10 epochs, "
           f"{args.rounds} rounds of {args.steps} steps, 1 thread")  # fmt: skip
     print(f"calibration before: {line(before, 5_000, 3)}")
-    print(f"{'learner':<12} {'steps/s':>8} {'/ ppo (median, min-max)':>26}")
+    print(f"{'learner':<14} {'steps/s':>8} {'/ ppo (median, min-max)':>26}")
     for name, values in rates.items():
         ratios = [v / p for v, p in zip(values, rates["ppo"], strict=True)]
         span = f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})"
-        print(f"{name:<12} {statistics.median(values):>8.0f} {span:>26}")
+        print(f"{name:<14} {statistics.median(values):>8.0f} {span:>26}")
     print(f"calibration after: {line(after, 5_000, 3)}")
 
 
