@@ -349,3 +349,20 @@ def test_the_schedule_does_not_depend_on_how_the_jobs_are_cut() -> None:
     # seed s, episode e of two plays schedule episode 2s + e + 1
     assert shifted[(1, 1)] == _at_index("ompo-nonstationary", 4, SEED_STRIDE + 1)
     assert len(set(shifted.values())) == len(shifted)
+
+
+def test_the_training_quick_eval_plays_a_shifted_episode(tmp_path: Any) -> None:
+    import csv
+
+    from advgame.training import TrainConfig, train
+
+    config = TrainConfig(
+        scenario="Hopper-v5", preset="ompo-nonstationary", learned=[], iterations=1,
+        protagonist_steps=64, protagonist_hparams={"n_steps": 64, "batch_size": 64},
+        eval_episodes=1, task_options={"max_episode_steps": 60},
+    )  # fmt: skip
+    run = train(config, tmp_path / "run", progress=False)
+    with (run / "progress.csv").open(newline="") as f:
+        [row] = list(csv.DictReader(f))
+    # episode 1 of the schedule (episode 0 would be the nominal body: sin(0) = 0)
+    assert float(row["eval_attacked_return"]) != float(row["eval_nominal_return"])

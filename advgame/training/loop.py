@@ -136,20 +136,24 @@ class Run:
         prot.learn(self.cfg.warmup_steps, stats)
 
     def _quick_eval(self, protagonists: dict[str, Any], it: int) -> dict[str, float]:
-        """Mean true return of the deterministic protagonists, nominal and attacked (full budget)."""
+        """Mean true return of the deterministic protagonists, nominal and attacked (full budget).
+
+        Episode i plays episode ``1 + i`` of any scheduled adversary (a shift that varies per
+        episode, `advgame.evaluation.schedule_index`'s convention), the same ones every
+        iteration, so the attacked curve is comparable across iterations.
+        """
         if not self.cfg.eval_episodes:
             return {}
         t = self.t
         game = make(self.cfg.scenario, **self.cfg.game_options(), phase="eval")
         seed = self.cfg.seed + 100_000 + it
-        nominal = rollout(game, protagonists, seed=seed, episodes=self.cfg.eval_episodes)
+        episodes = {"seed": seed, "episodes": self.cfg.eval_episodes, "first_index": 1}
+        nominal = rollout(game, protagonists, **episodes)
         attackers = {
             **t.fixed,
             **{a: t.latest.get(a, t.population.of(a)[-1].spec) for a in t.learned},
         }
-        attacked = rollout(
-            game, {**protagonists, **attackers}, seed=seed, episodes=self.cfg.eval_episodes
-        )
+        attacked = rollout(game, {**protagonists, **attackers}, **episodes)
         game.close()
         return {
             "eval_nominal_return": _mean([r.true_return for r in nominal]),
