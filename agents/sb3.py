@@ -173,15 +173,19 @@ class SAPPOConfig(PPOConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         if not (isinstance(self.sa_kappa, (int, float)) and self.sa_kappa >= 0):
-            raise ConfigError(f"SAPPOConfig.sa_kappa must be >= 0, got {self.sa_kappa!r}.")
+            raise ConfigError(
+                f"{type(self).__name__}.sa_kappa must be >= 0, got {self.sa_kappa!r}."
+            )
         if not (isinstance(self.sa_eps, (int, float)) and self.sa_eps >= 0):
-            raise ConfigError(f"SAPPOConfig.sa_eps must be >= 0, got {self.sa_eps!r}.")
+            raise ConfigError(f"{type(self).__name__}.sa_eps must be >= 0, got {self.sa_eps!r}.")
         self._check_ints(("sa_steps",), 0)
         if not (isinstance(self.sa_ramp, (int, float)) and 0 <= self.sa_ramp <= 1):
-            raise ConfigError(f"SAPPOConfig.sa_ramp must be in [0, 1], got {self.sa_ramp!r}.")
+            raise ConfigError(
+                f"{type(self).__name__}.sa_ramp must be in [0, 1], got {self.sa_ramp!r}."
+            )
         if self.sa_space not in ("normalized", "raw"):
             raise ConfigError(
-                f"SAPPOConfig.sa_space must be 'normalized' or 'raw', got {self.sa_space!r}."
+                f"{type(self).__name__}.sa_space must be 'normalized' or 'raw', got {self.sa_space!r}."
             )
 
     @staticmethod
