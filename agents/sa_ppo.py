@@ -20,7 +20,7 @@ saves and loads as a PPO (a released SA-PPO agent plays as a plain PPO checkpoin
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -136,10 +136,18 @@ def _numpy_walk(
 class SASettings:
     """The SA learners' shared settings: ε now (ramped) and the inputs' clip range.
 
-    A mixin for an SB3 algorithm that stores the ``sa_*`` settings as attributes (`SAPPO`,
-    `advgame.agents.sa_recurrent.SARecurrentPPO`).
+    A mixin for an SB3 algorithm (`SAPPO`, `advgame.agents.sa_recurrent.SARecurrentPPO`): its
+    ``__init__`` takes the ``sa_*`` keywords (defaults: the class's `sa_defaults`), stores them
+    as attributes and passes everything else on to the algorithm.
     """
 
+    sa_defaults: ClassVar[dict[str, Any]] = {
+        "sa_kappa": 0.1, "sa_eps": 0.075, "sa_steps": 10, "sa_ramp": 0.75,
+        "sa_space": "normalized", "sa_total_steps": 1,
+    }  # fmt: skip
+    """The ``sa_*`` keywords' defaults (SA-PPO's Hopper configs)."""
+    sa_kappa: float
+    sa_steps: int
     sa_eps: float
     sa_ramp: float
     sa_space: str
@@ -147,6 +155,11 @@ class SASettings:
     num_timesteps: int
     observation_space: Any
     get_vec_normalize_env: Any
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        for name, default in self.sa_defaults.items():
+            setattr(self, name, kwargs.pop(name, default))
+        super().__init__(*args, **kwargs)
 
     def sa_radius(self) -> torch.Tensor:
         """ε now (ramped), per policy-input dimension."""
@@ -179,21 +192,6 @@ class SAPPO(SASettings, PPO):
         **kwargs: SB3 `PPO`'s keyword arguments.
 
     """
-
-    def __init__(
-        self,
-        *args: Any,
-        sa_kappa: float = 0.1,
-        sa_eps: float = 0.075,
-        sa_steps: int = 10,
-        sa_ramp: float = 0.75,
-        sa_space: str = "normalized",
-        sa_total_steps: int = 1,
-        **kwargs: Any,
-    ) -> None:
-        self.sa_kappa, self.sa_eps, self.sa_steps = sa_kappa, sa_eps, sa_steps
-        self.sa_ramp, self.sa_space, self.sa_total_steps = sa_ramp, sa_space, sa_total_steps
-        super().__init__(*args, **kwargs)
 
     def train(self) -> None:
         """One PPO update over the rollout buffer, with the SA regulariser on each minibatch."""

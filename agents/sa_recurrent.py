@@ -40,7 +40,7 @@ Deviations from the authors' code, and why:
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -141,20 +141,10 @@ class SARecurrentPPO(SASettings, RecurrentPPO):
 
     """
 
-    def __init__(
-        self,
-        *args: Any,
-        sa_kappa: float = 0.3,
-        sa_eps: float = 0.075,
-        sa_steps: int = 2,
-        sa_ramp: float = 0.75,
-        sa_space: str = "normalized",
-        sa_total_steps: int = 1,
-        **kwargs: Any,
-    ) -> None:
-        self.sa_kappa, self.sa_eps, self.sa_steps = sa_kappa, sa_eps, sa_steps
-        self.sa_ramp, self.sa_space, self.sa_total_steps = sa_ramp, sa_space, sa_total_steps
-        super().__init__(*args, **kwargs)
+    sa_defaults: ClassVar[dict[str, Any]] = {
+        **SASettings.sa_defaults, "sa_kappa": 0.3, "sa_steps": 2,
+    }  # fmt: skip
+    """ATLA-LSTM-SA's: κ 0.3 and 2 steps; ε, ramp and units as SA-PPO's."""
 
     def _ppo_loss(
         self, batch: Any, clip: float, clip_vf: float | None, logs: dict[str, list[float]]
