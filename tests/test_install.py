@@ -23,7 +23,7 @@ from advgame.errors import MissingExtraError
 
 ROOT = Path(advgame.__file__).resolve().parents[1]
 LOCK = ROOT / "constraints.txt"
-CORE = {"gymnasium", "pettingzoo", "mujoco", "torch", "stable-baselines3", "numpy"}
+CORE = {"gymnasium", "pettingzoo", "mujoco", "torch", "stable-baselines3", "sb3-contrib", "numpy"}
 CORE |= {"matplotlib", "tqdm", "tensorboard"}
 EXTRAS = {
     "box2d",
