@@ -91,22 +91,13 @@ def victim_fingerprint(victim: WhiteBox, size: int) -> list[bytes]:
 def _recurrent_probe(victim: Any, probes: torch.Tensor) -> bytes:
     """The mean actions of a recurrent victim along `probes` played in order from a zero memory.
 
-    A shallow copy plays them (``reset`` gives it its own zeroed memory, deterministic
-    actions leave torch's generator alone), so the victim's own memory is untouched.
+    (`advgame.agents.recurrent_policy.RecurrentSB3Policy.episode_means`: the victim's own memory
+    is untouched.)
     """
-    import copy
-
     inner = victim
     while getattr(type(inner), "wrapped", None) is not None:  # a mixture: its member now
         inner = inner.wrapped
-    probe = copy.copy(inner)
-    probe.deterministic = True
-    probe.reset(None)
-    rows = []
-    for row in probes:
-        rows.append(probe.action_mean(row[None]).numpy())
-        probe.act(row.numpy())
-    return np.concatenate(rows).tobytes()
+    return inner.episode_means(probes).tobytes()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -66,10 +66,11 @@ class RecurrentSB3Policy(SB3Policy):
                 f"{type(model).__name__}; use SB3Policy for feed-forward policies."
             )
         super().__init__(model, obs_mean, obs_var, deterministic, clip_obs, epsilon)
-        self._actor: tuple[Any, Any] = self._zeros()
-        self._critic: tuple[Any, Any] = self._zeros()
-        self._seen: list[Any] = []  # policy inputs since the episode start (critic catch-up)
-        self._critic_at = 0
+        self._actor: tuple[Any, Any]
+        self._critic: tuple[Any, Any]
+        self._seen: list[Any]  # policy inputs since the episode start (critic catch-up)
+        self._critic_at: int
+        self._forget()
 
     def _zeros(self) -> tuple[Any, Any]:
         import torch
@@ -81,6 +82,10 @@ class RecurrentSB3Policy(SB3Policy):
     def reset(self, seed: int | None = None) -> None:
         """Start an episode: zero the memory (and seed sampling, as `SB3Policy.reset`)."""
         super().reset(seed)
+        self._forget()
+
+    def _forget(self) -> None:
+        """Zero the actor's and the critic's memory; nothing seen yet this episode."""
         self._actor, self._critic = self._zeros(), self._zeros()
         self._seen, self._critic_at = [], 0
 
@@ -124,15 +129,34 @@ class RecurrentSB3Policy(SB3Policy):
                 deterministic=self.deterministic,
             )
         self._seen.append(x)
-        out = actions.cpu().numpy().reshape((-1, *self.model.action_space.shape))
-        if self._box is not None:
-            out = policy.unscale_action(out) if self._squash else np.clip(out, *self._box)
-        return out
+        return self._in_box(actions.cpu().numpy().reshape((-1, *self.model.action_space.shape)))
 
     # -- white-box access: the carried state, never advanced here -------------------------------
     @staticmethod
     def _expand(state: tuple[Any, Any], n: int) -> tuple[Any, Any]:
         return state[0].expand(-1, n, -1).contiguous(), state[1].expand(-1, n, -1).contiguous()
+
+    def episode_means(self, observations: Any) -> np.ndarray:
+        """The mean actions along `observations` (a tensor ``[n, obs]``) played as one episode.
+
+        A shallow copy plays them from a zeroed memory, deterministically (torch's generator is
+        left alone), so this policy's own memory is untouched. Row ``i`` is the mean at
+        observation ``i`` with the memory of observations ``0 .. i-1``: what attacks that learn
+        per victim key their cache with (`advgame.adversaries.whitebox.victim_fingerprint`).
+        """
+        import copy
+
+        import torch
+
+        probe = copy.copy(self)
+        probe.deterministic = True
+        probe.reset(None)
+        rows = []
+        with torch.no_grad():
+            for row in observations:
+                rows.append(probe.action_mean(row[None]).numpy())
+                probe.act(row.numpy())
+        return np.concatenate(rows)
 
     def hidden_state(self) -> dict[str, tuple[Any, Any]]:
         """Copies of the memory the policy acts with next: ``{"actor": (h, c), "critic": (h, c)}``.
@@ -153,12 +177,7 @@ class RecurrentSB3Policy(SB3Policy):
         dist, _ = self.model.policy.get_distribution(
             x, self._expand(self._actor, len(x)), torch.zeros(len(x))
         )
-        inner = dist.distribution
-        if not hasattr(inner, "mean") or not hasattr(inner, "stddev"):
-            raise ConfigError(
-                f"White-box attacks need a Gaussian policy; this one acts through {inner}."
-            )
-        return inner.mean
+        return self._gaussian(dist.distribution).mean
 
     def value(self, obs: Any) -> Any:
         """``V(obs)`` per row, each row with the value head's current memory."""
@@ -189,10 +208,7 @@ class RecurrentSB3Policy(SB3Policy):
         if picked is None:
             return None
         modules, memory = picked
-        norm = None
-        if self.mean is not None and self.std is not None:
-            norm = (self.mean, self.std, self.clip_obs)
-        net = self._numpy.get(head, modules, norm)
+        net = self._numpy.get(head, modules, self._norm_stats())
         if net is None or memory is None:
             return net
         h, c = self._actor if memory == "actor" else self._critic_state()

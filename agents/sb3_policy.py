@@ -161,10 +161,13 @@ class SB3Policy:
             with torch.no_grad():
                 rows = [policy._predict(x[i : i + 1], self.deterministic) for i in range(len(x))]
             action = torch.cat(rows)
-        out = action.cpu().numpy()
-        if self._box is not None:
-            out = policy.unscale_action(out) if self._squash else out.clip(*self._box)
-        return out
+        return self._in_box(action.cpu().numpy())
+
+    def _in_box(self, out: np.ndarray) -> np.ndarray:
+        """Actions as SB3's ``predict`` returns them: a squashed policy's unscaled, else clipped."""
+        if self._box is None:
+            return out
+        return self.model.policy.unscale_action(out) if self._squash else out.clip(*self._box)
 
     # -- white-box access (`advgame.core.policy.WhiteBox`): forward passes only, nothing trained ----
     def _features(self, obs: Any) -> Any:
@@ -186,12 +189,7 @@ class SB3Policy:
         if mean is not None:
             return mean
         if hasattr(policy, "get_distribution"):
-            dist = policy.get_distribution(x).distribution
-            if not hasattr(dist, "mean") or not hasattr(dist, "stddev"):
-                raise ConfigError(
-                    f"White-box attacks need a Gaussian policy; this one acts through {dist}."
-                )
-            return dist.mean
+            return self._gaussian(policy.get_distribution(x).distribution).mean
         if getattr(policy, "actor", None) is None:
             raise ConfigError(f"{type(policy).__name__} has no actor network to attack.")
         if hasattr(policy.actor, "action_dist"):  # SAC: the squashed Gaussian's mode
@@ -205,10 +203,22 @@ class SB3Policy:
         `value`, without torch's per-step overhead); None for SAC, TD3 and policies with layers
         a `NumpyNet` does not cover.
         """
-        norm = None
-        if self.mean is not None and self.std is not None:
-            norm = (self.mean, self.std, self.clip_obs)
-        return self._numpy.get(head, sb3_modules(self.model.policy, head), norm)
+        return self._numpy.get(head, sb3_modules(self.model.policy, head), self._norm_stats())
+
+    @staticmethod
+    def _gaussian(dist: Any) -> Any:
+        """`dist` (a torch distribution), refused with a clear error unless it is a Gaussian."""
+        if not hasattr(dist, "mean") or not hasattr(dist, "stddev"):
+            raise ConfigError(
+                f"White-box attacks need a Gaussian policy; this one acts through {dist}."
+            )
+        return dist
+
+    def _norm_stats(self) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """The frozen normalizer as a `NumpyNet` applies it: ``(mean, std, clip)``, or None."""
+        if self.mean is None or self.std is None:
+            return None
+        return self.mean, self.std, self.clip_obs
 
     def action_std(self) -> Any:
         """PPO's state-independent action std; ``None`` for SAC/TD3 (attacked through means)."""
