@@ -96,13 +96,17 @@ def _rates(paths: dict[str, Any], rounds: int) -> tuple[dict[str, list[float]], 
     return rates, rows
 
 
+def _jobs(env: str, prot: dict[str, Any], episodes: int) -> tuple[Any, Any]:
+    """The nominal and the MAD-attacked (preset ``default``) jobs of `prot`, one per episode."""
+    seeds = tuple(range(episodes))
+    nominal = population_jobs(env, prot, {"nominal": AdversarySetup.nominal()}, seeds=seeds)
+    mad = AdversarySetup({"preset": "default"}, {"observation_adversary": MADAttack()})
+    return nominal, population_jobs(env, prot, {"mad": mad}, seeds=seeds)
+
+
 def ppo_rates(folder: Path, episodes: int, rounds: int, train: int) -> dict[str, list[float]]:
     """The PPO protagonist's three paths (the rows of the two attacked ones checked equal)."""
-    prot = {"ppo": _train(train, folder)}
-    seeds = tuple(range(episodes))
-    nominal = population_jobs(ENV, prot, {"nominal": AdversarySetup.nominal()}, seeds=seeds)
-    mad = AdversarySetup({"preset": "default"}, {"observation_adversary": MADAttack()})
-    attacked = population_jobs(ENV, prot, {"mad": mad}, seeds=seeds)
+    nominal, attacked = _jobs(ENV, {"ppo": _train(train, folder)}, episodes)
     paths = {
         "nominal": lambda: evaluate(nominal, progress=False).rows,
         "mad alone": lambda: [r for u in split_seeds(attacked, 1) for r in run_job(u)],
@@ -118,11 +122,7 @@ def ppo_rates(folder: Path, episodes: int, rounds: int, train: int) -> dict[str,
 
 def lstm_rates(folder: Path, episodes: int, rounds: int) -> dict[str, list[float]]:
     """The recurrent victim's two paths: nominal and MAD-attacked, through `evaluate`."""
-    prot = {"lstm": _lstm(folder)}
-    seeds = tuple(range(episodes))
-    nominal = population_jobs(LSTM_ENV, prot, {"nominal": AdversarySetup.nominal()}, seeds=seeds)
-    mad = AdversarySetup({"preset": "default"}, {"observation_adversary": MADAttack()})
-    attacked = population_jobs(LSTM_ENV, prot, {"mad": mad}, seeds=seeds)
+    nominal, attacked = _jobs(LSTM_ENV, {"lstm": _lstm(folder)}, episodes)
     paths = {
         "lstm nominal": lambda: evaluate(nominal, progress=False).rows,
         "lstm mad": lambda: evaluate(attacked, progress=False).rows,
@@ -168,8 +168,12 @@ def main(argv: list[str] | None = None) -> None:
     if args.smoke:
         args.rounds, args.episodes, args.train, args.lstm_episodes = 1, 2, 256, 1
     torch.set_num_threads(1)
-    calibration = step_us(steps=2_000 if args.smoke else 5_000, repeats=3)
-    print(f"before: {line(calibration, 5_000, 3)}")
+    steps = 2_000 if args.smoke else 5_000  # the calibration's raw steps per repeat
+
+    def calibrated() -> str:
+        return line(step_us(steps=steps, repeats=3), steps, 3)
+
+    print(f"before: {calibrated()}")
     with tempfile.TemporaryDirectory() as tmp:
         if "ppo" in args.victims:
             rates = ppo_rates(Path(tmp), args.episodes, args.rounds, args.train)
@@ -179,7 +183,7 @@ def main(argv: list[str] | None = None) -> None:
             rates = lstm_rates(Path(tmp), args.lstm_episodes, args.rounds)
             title = f"{LSTM_ENV}, RecurrentPPO (64 LSTM units), {args.lstm_episodes} episodes, "
             _report(title + f"{args.rounds} rounds, one worker", rates, "lstm mad")
-    print(f"after: {line(step_us(steps=2_000 if args.smoke else 5_000, repeats=3), 5_000, 3)}")
+    print(f"after: {calibrated()}")
 
 
 if __name__ == "__main__":
