@@ -98,6 +98,41 @@ class RecurrentSB3Policy(SB3Policy):
         """
         return None
 
+    @property
+    def inexact_batch_key(self) -> tuple:
+        """Equal for copies of one network and normalizer: `act_group` may serve them together.
+
+        Only callers that accept last-bit differences from play alone use it (training
+        rollouts: `advgame.core.policy.act_batch` with ``exact=False``).
+        """
+        stats = (id(self._stats[0]), id(self._stats[1]), self.clip_obs)
+        return ("recurrent", id(self.model), *stats, self.deterministic)
+
+    def act_group(self, policies: Any, observations: np.ndarray) -> Any:
+        """``policies[i].act(observations[i])`` for copies of this network, in one LSTM pass.
+
+        Each copy's memory goes in as one column of the batch and comes back advanced on its
+        own row. torch's batched LSTM kernel rounds differently from its one-row pass, so the
+        actions may differ from `act`'s in the last bit.
+        """
+        import torch
+
+        self._prepare()
+        x = torch.as_tensor(self._normalize(np.asarray(observations)))
+        h = torch.cat([p._actor[0] for p in policies], dim=1)
+        c = torch.cat([p._actor[1] for p in policies], dim=1)
+        with torch.no_grad():
+            actions, (h, c) = self.model.policy._predict(
+                x,
+                lstm_states=(h, c),
+                episode_starts=torch.zeros(len(policies)),
+                deterministic=self.deterministic,
+            )
+        for i, p in enumerate(policies):
+            p._actor = (h[:, i : i + 1].clone(), c[:, i : i + 1].clone())
+            p._seen.append(x[i : i + 1])
+        return self._in_box(actions.cpu().numpy().reshape((-1, *self.model.action_space.shape)))
+
     def act(self, observation: Any) -> Any:
         """The action for one raw observation; the memory then holds it."""
         if isinstance(observation, dict):

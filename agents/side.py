@@ -24,14 +24,18 @@ log = logging.getLogger(__name__)
 
 
 def _make_venv(env_fns: Sequence[Callable[[], Any]], vec_env: str) -> Any:
-    """In-process views in lockstep (`VectorView`: opponents batched), or one process per view."""
+    """In-process views in lockstep (`VectorView`: opponents batched), or one process per view.
+
+    Training rollouts need the distribution of episodes, not bit-for-bit replays of single
+    views, so a frozen LSTM opponent's copies share one forward pass (``exact=False``).
+    """
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
     from advgame.core.vector import VectorView
 
     if vec_env == "subproc" and len(env_fns) > 1:
         return SubprocVecEnv(list(env_fns), start_method="forkserver")
-    return VectorView(list(env_fns))
+    return VectorView(list(env_fns), exact=False)
 
 
 class Side:

@@ -195,6 +195,49 @@ def test_a_frozen_recurrent_protagonist_resets_its_memory_in_an_adversary_view(
     assert victim._seen == [] and not torch.any(victim.hidden_state()["actor"][0])
 
 
+def test_training_views_ask_a_frozen_lstms_copies_in_one_pass(
+    outside: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from advgame.core.vector import VectorView
+    from advgame.core.views import view_factory
+
+    spec = SB3Checkpoint(
+        str(outside / "model.zip"), "recurrent-ppo", str(outside / "vecnormalize.pkl")
+    )
+    fns = [
+        view_factory("Hopper-v5", "observation_adversary", {"protagonist": spec}, preset="atla")
+    ] * 3
+    calls = {"group": 0, "act": 0}
+    group, act = RecurrentSB3Policy.act_group, RecurrentSB3Policy.act
+
+    def counted_group(self, policies, observations):  # type: ignore[no-untyped-def]
+        calls["group"] += 1
+        return group(self, policies, observations)
+
+    def counted_act(self, observation):  # type: ignore[no-untyped-def]
+        calls["act"] += 1
+        return act(self, observation)
+
+    monkeypatch.setattr(RecurrentSB3Policy, "act_group", counted_group)
+    monkeypatch.setattr(RecurrentSB3Policy, "act", counted_act)
+    memories = {}
+    for exact in (True, False):
+        venv = VectorView(fns, exact=exact)
+        venv.seed(0)
+        venv.reset()
+        calls.update(group=0, act=0)
+        for _ in range(8):
+            venv.step(np.zeros((3, *venv.action_space.shape), dtype=np.float32))
+        memories[exact] = [v.policies["protagonist"].hidden_state()["actor"] for v in venv.envs]
+        steps = [len(v.policies["protagonist"]._seen) for v in venv.envs]
+        assert steps == [8, 8, 8]  # one memory step per environment step, per copy
+        assert calls == ({"group": 0, "act": 24} if exact else {"group": 8, "act": 0})
+    for alone, together in zip(memories[True], memories[False], strict=True):
+        # each copy's own row: the batched pass only rounds differently
+        torch.testing.assert_close(together, alone, atol=1e-5, rtol=1e-5)
+    assert not torch.equal(memories[True][0][0], memories[True][1][0])  # three different games
+
+
 def test_a_checkpoint_loaded_as_the_wrong_kind_is_refused_clearly(outside: Path) -> None:
     with pytest.raises(ConfigError, match="recurrent-ppo"):
         load_model(str(outside / "model.zip"), "ppo")

@@ -49,6 +49,10 @@ class Policy(Protocol):
 # A policy may also offer ``act_batch(observations[n, ...]) -> actions[n, ...]`` with a
 # ``batch_key`` property: policies with equal non-None keys (e.g. N views' copies of one frozen
 # network) are then served by one `act_batch` call (see `act_batch` below). Both are optional.
+# A policy whose batched pass cannot reproduce its one-row pass (an LSTM: torch's oneDNN kernel
+# rounds a row of a batch differently) keeps ``batch_key`` None and may offer
+# ``inexact_batch_key`` with ``act_group``: callers that accept last-bit differences from play
+# alone (training rollouts, `act_batch(..., exact=False)`) then ask its copies at once.
 # A policy that follows a per-episode schedule (a sinusoidal shift) may offer
 # ``set_episode_index(index)``: its next `reset` then starts episode `index` of its schedule
 # instead of the next of its own count (evaluation tables declare which episode each of their
@@ -210,14 +214,20 @@ def as_policy(obj: Any, info: AgentInfo) -> Policy:
     )
 
 
-def act_batch(policies: Sequence[Any], observations: Sequence[Any]) -> Sequence[Any]:
+def act_batch(
+    policies: Sequence[Any], observations: Sequence[Any], exact: bool = True
+) -> Sequence[Any]:
     """``policies[i].act(observations[i])`` for every ``i``, in one call where the policies allow.
 
     Policies that expose an equal, non-None ``batch_key`` and an ``act_batch(obs[n, ...])``
     are served by one `act_batch` call of the first (e.g. N views of one frozen SB3 network);
     policies whose state differs per game (a white-box attack bound to its game) offer
     ``act_group(policies, obs[n, ...])`` instead; any other policy is asked one observation at
-    a time.
+    a time. Every row is then exactly what the policy would answer alone.
+
+    With ``exact=False`` policies that share an ``inexact_batch_key`` (the copies of one frozen
+    LSTM, each with its own memory) are served by one ``act_group`` call too, whose rows may
+    differ from play alone in the last bit: for training rollouts, never for evaluation.
     """
     if len(policies) == 1:
         return [policies[0].act(observations[0])]
@@ -228,6 +238,10 @@ def act_batch(policies: Sequence[Any], observations: Sequence[Any]) -> Sequence[
             return head.act_group(policies, np.array(observations))
         if hasattr(head, "act_batch"):
             return head.act_batch(np.array(observations))  # = np.stack for equal shapes
+    if not exact:
+        key = getattr(head, "inexact_batch_key", None)
+        if key is not None and all(getattr(p, "inexact_batch_key", None) == key for p in policies):
+            return head.act_group(policies, np.array(observations))
     return [p.act(o) for p, o in zip(policies, observations, strict=True)]
 
 

@@ -13,7 +13,10 @@ games are alike (one scenario and set-up) the group's move is made by
 `advgame.core.lockstep.play_all`: each adversary's actions decoded, the perturbations applied
 and the protagonist's actions checked once over ``[N, ...]``; otherwise game by game.
 
-So every episode is the one N single views would play with the same seeds (``seed(s)`` gives
+So every episode is the one N single views would play with the same seeds (with
+``exact=False``, the training loop's choice, the copies of a frozen LSTM opponent are asked
+in one batched pass too, whose rows may differ from play alone in the last bit: the same
+distribution of episodes, not the same episodes) (``seed(s)`` gives
 view ``i`` the seed ``s + i`` as SB3 does; autoreset, ``terminal_observation``,
 ``TimeLimit.truncated`` and the per-view ``clipped`` counters are `DummyVecEnv`'s), while a
 learned adversary costs one forward pass per step instead of N. A single view is the N = 1
@@ -45,6 +48,8 @@ class VectorView(DummyVecEnv):
     Args:
         env_fns: thunks that each build one view (`advgame.core.views.view_factory`), all of
             the same agent.
+        exact: keep every episode bit for bit the one a single view plays (True); False lets
+            a recurrent opponent's copies share one forward pass (`act_batch`'s ``exact``).
 
     Example:
         >>> from advgame.adversaries import GaussianAdversary
@@ -60,8 +65,12 @@ class VectorView(DummyVecEnv):
 
     envs: list[SingleAgentView]  # type: ignore[assignment]
 
-    def __init__(self, env_fns: Sequence[Callable[[], SingleAgentView]]) -> None:
+    def __init__(
+        self, env_fns: Sequence[Callable[[], SingleAgentView]], exact: bool = True
+    ) -> None:
         super().__init__(list(env_fns))
+        self.exact = exact
+        """Whether each episode is exactly a single view's (see the module docstring)."""
         agents = {getattr(env, "agent", None) for env in self.envs}
         if not all(isinstance(env, SingleAgentView) for env in self.envs) or len(agents) != 1:
             kinds = sorted({type(env).__name__ for env in self.envs})
@@ -133,7 +142,9 @@ class VectorView(DummyVecEnv):
         actions: dict[str, Any] = {}
         for agent, _ in views[idx[0]]._players_now():  # the group's views share their movers
             actions[agent] = act_batch(
-                [views[i].policies[agent] for i in idx], [games[i].observe(agent) for i in idx]
+                [views[i].policies[agent] for i in idx],
+                [games[i].observe(agent) for i in idx],
+                self.exact,
             )
         if learner is not None:
             actions[self.agent] = learner if len(idx) == len(views) else [learner[i] for i in idx]
