@@ -129,10 +129,18 @@ class CausalWorldModel(nn.Module):
         return th.sigmoid(self.graph_logits)
 
     def sample_graph(self, rows: int) -> th.Tensor:
-        """One relaxed graph per row (entries in (0, 1)) by the binary Gumbel-Softmax at τ."""
-        logits = self.graph_logits.expand(rows, *self.graph_logits.shape)
-        two = th.stack([logits, th.zeros_like(logits)], dim=-1)  # classes: edge, no edge
-        return F.gumbel_softmax(two, tau=self.temperature, hard=False, dim=-1)[..., 0]
+        """One relaxed graph per row (entries in (0, 1)) by the binary Gumbel-Softmax at τ.
+
+        The two-class Gumbel-Softmax over (edge: ``φ``, no edge: 0) gives the edge
+        ``exp((φ + g₁)/τ) / (exp((φ + g₁)/τ) + exp(g₀/τ)) = σ((φ + g₁ − g₀)/τ)``, and the
+        difference of two standard Gumbels is a standard logistic, ``log u − log(1 − u)``: so
+        one uniform draw and a sigmoid per edge, the same distribution and gradient as
+        ``F.gumbel_softmax`` on the stacked logits at a small part of its cost (its
+        exponential draws and two-class softmax took 45 % of RSC's update on RS-LiftCausal).
+        """
+        tiny = th.finfo(self.graph_logits.dtype).tiny
+        u = th.rand(rows, *self.graph_logits.shape).clamp_(tiny, 1.0 - 2**-24)
+        return th.sigmoid((self.graph_logits + (th.log(u) - th.log1p(-u))) / self.temperature)
 
     def mode_graph(self) -> th.Tensor:
         """The most probable graph: the edges with probability > 0.5."""

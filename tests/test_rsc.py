@@ -105,6 +105,32 @@ def test_augmentation_weakens_the_spurious_correlation(trained) -> None:
     assert float((aug.next_observations[:, 0] - want).abs().mean()) < 0.05
 
 
+@pytest.mark.parametrize("tau", [1.0, 0.5])
+def test_graph_draws_are_the_binary_gumbel_softmax_in_distribution_and_gradient(tau) -> None:
+    from torch.nn import functional as F
+
+    model = CausalWorldModel(1, 1, temperature=tau)
+    with th.no_grad():
+        model.graph_logits.copy_(th.tensor([[-2.0, 0.0], [1.5, 3.0]]))
+    th.manual_seed(0)
+    ours = model.sample_graph(40_000)
+    logits = model.graph_logits.expand(40_000, 2, 2)
+    two = th.stack([logits, th.zeros_like(logits)], dim=-1)
+    theirs = F.gumbel_softmax(two, tau=tau, hard=False, dim=-1)[..., 0]
+    qs = th.tensor([0.1, 0.25, 0.5, 0.75, 0.9])
+    for o in range(2):
+        for i in range(2):  # each edge's quantiles agree to sampling error
+            a = th.quantile(ours[:, o, i].detach(), qs)
+            b = th.quantile(theirs[:, o, i].detach(), qs)
+            th.testing.assert_close(a, b, atol=0.015, rtol=0)
+    grads = []
+    for draw in (ours, theirs):  # the mean edge's gradient with respect to the logits
+        (grad,) = th.autograd.grad(draw.mean(0).sum(), model.graph_logits)
+        grads.append(grad)
+    th.testing.assert_close(grads[0], grads[1], atol=0.01, rtol=0.05)
+    assert 0.0 <= float(ours.min()) and float(ours.max()) <= 1.0 and not ours.isnan().any()
+
+
 def test_perturbation_takes_the_donor_most_different_in_one_dimension_only() -> None:
     th.manual_seed(0)
     states = th.tensor([[0.0, 0.0], [0.1, 2.0], [2.0, 0.1], [1.0, 1.0]])
