@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,7 +21,13 @@ import numpy as np
 from advgame.core.policy import WhiteBox, WhiteBoxForwarder, as_policy
 from advgame.errors import ConfigError
 
-__all__ = ["BestResponseJob", "MixturePolicy", "MixtureSpec", "train_best_response"]
+__all__ = [
+    "BestResponseJob",
+    "MixturePolicy",
+    "MixtureSpec",
+    "best_response_side",
+    "train_best_response",
+]
 
 log = logging.getLogger(__name__)
 
@@ -138,8 +144,24 @@ def _opponent_std(job: BestResponseJob) -> np.ndarray | None:
     return None
 
 
-def train_best_response(job: BestResponseJob) -> dict[str, Any]:
-    """Train the job's learner; return ``{"files": {name: bytes}, "model", "normalizer", "algo"}``."""
+def best_response_side(
+    job: BestResponseJob, folder: Path | None = None
+) -> tuple[Any, Callable[[], None], int]:
+    """The job's learner as a `Side` and the call that sets its budgets before each chunk.
+
+    Args:
+        job: the best response to train.
+        folder: a folder a `Side.save` of this job wrote, to continue from (None: a new side).
+
+    Returns:
+        ``(side, rescale, chunks)``: ``rescale()`` gives the scenario's normalized-space
+        budgets the victim's normalizer std (the learner's own, as it stands, where the
+        learner is the victim; else the most likely opponent checkpoint's, fixed), as the
+        alternation loop does per phase: call it before each `Side.learn`. ``chunks``: how
+        many `Side.learn` calls the job's steps take (`_CHUNKS` where the learner is a
+        normalized victim, whose std moves as it learns; else 1).
+
+    """
     import torch
 
     from advgame.agents.side import Side
@@ -155,17 +177,30 @@ def train_best_response(job: BestResponseJob) -> dict[str, Any]:
     kwargs = {**job.make_kwargs, "phase": "train"}
     fns = [view_factory(job.scenario, job.agent, dict(job.opponents), **kwargs)] * n_envs
     targets = _normalized_targets(job)
-    side = Side(job.agent, learner, fns, job.seed, job.steps, normalize=job.normalize)
+    if folder is None:
+        side = Side(job.agent, learner, fns, job.seed, job.steps, normalize=job.normalize)
+    else:
+        side = Side.load(folder, job.agent, learner, fns)
+    learner_is_victim = job.agent in targets
+    fixed = None if learner_is_victim else _opponent_std(job)
+
+    def rescale() -> None:
+        std = side.observation_std() if learner_is_victim else fixed
+        if std is not None:
+            for target in targets:
+                side.set_observation_scale(target, std)
+
+    chunked = bool(targets) and learner_is_victim and side.normalized
+    return side, rescale, _CHUNKS if chunked else 1
+
+
+def train_best_response(job: BestResponseJob) -> dict[str, Any]:
+    """Train the job's learner; return ``{"files": {name: bytes}, "model", "normalizer", "algo"}``."""
+    side, rescale, chunks = best_response_side(job)
     try:
-        learner_is_victim = job.agent in targets
-        chunks = _CHUNKS if targets and (learner_is_victim and side.normalized) else 1
-        fixed = None if learner_is_victim else _opponent_std(job)
         done = 0
         for k in range(chunks):
-            std = side.observation_std() if learner_is_victim else fixed
-            if std is not None:
-                for target in targets:
-                    side.set_observation_scale(target, std)
+            rescale()
             part = job.steps * (k + 1) // chunks - done
             side.learn(part)
             done += part
