@@ -24,6 +24,32 @@ def quartiles(values: list[float]) -> str:
     return f"{q2:.2f} ({q1:.2f}-{q3:.2f})"
 
 
+def median_span(values: list[float], base: list[float]) -> str:
+    """``"median (min-max)"`` of the per-round ratios ``values[i] / base[i]``, two decimals."""
+    import statistics
+
+    ratios = [v / b for v, b in zip(values, base, strict=True)]
+    return f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})"
+
+
+def clock_method(obj: Any, name: str, clock: dict[str, float]) -> None:
+    """Wrap method `name` of `obj` so that its wall time accumulates in ``clock[name]``.
+
+    Set on the instance, so it wins over the class's method wherever the object calls
+    ``self.name(...)`` (SB3 calls ``self.train``).
+    """
+    inner = getattr(obj, name)
+
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        start = time.perf_counter()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            clock[name] += time.perf_counter() - start
+
+    setattr(obj, name, wrapper)
+
+
 def ratio_row(name: str, rates: dict[str, list[float]]) -> str:
     """A Markdown row: median raw steps/s, then every other variant's per-round ratio to raw.
 

@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 import torch
+from _common import median_span
 from calibrate import line, step_us
 
 from advgame.agents import side
@@ -73,8 +74,7 @@ def main() -> None:
     print(f"calibration before: {line(before, 5_000, 3)}")
     print(f"{'LSTM opponents':<14} {'s/iteration':>12} {'/ copy by copy (median, min-max)':>34}")
     for name, values in times.items():
-        ratios = [v / c for v, c in zip(values, times["copy by copy"], strict=True)]
-        span = f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})"
+        span = median_span(values, times["copy by copy"])
         print(f"{name:<14} {statistics.median(values):>12.1f} {span:>34}")
     print(f"calibration after: {line(after, 5_000, 3)}")
 

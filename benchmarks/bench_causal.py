@@ -26,6 +26,7 @@ from collections import defaultdict
 from typing import Any
 
 import torch
+from _common import clock_method
 from calibrate import line, step_us
 
 from advgame.agents import DBCConfig, RSCConfig, SACConfig
@@ -49,20 +50,6 @@ def _gumbel_softmax_graph(model: Any) -> None:
     world.sample_graph = sample_graph
 
 
-def _clocked(obj: Any, name: str, clock: dict[str, float]) -> None:
-    """Accumulate the wall time of method `name` of `obj` in ``clock[name]``."""
-    inner = getattr(obj, name)
-
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        start = time.perf_counter()
-        try:
-            return inner(*args, **kwargs)
-        finally:
-            clock[name] += time.perf_counter() - start
-
-    setattr(obj, name, wrapper)
-
-
 def _model(kind: str, start: int, warmup: int, seed: int) -> Any:
     venv = VectorView([view_factory(SCENARIO, "protagonist", preset=PRESET)])
     if kind == "sac":
@@ -83,7 +70,7 @@ def rate(kind: str, args: argparse.Namespace, seed: int) -> tuple[float, dict[st
     clock: dict[str, float] = defaultdict(float)
     if kind.startswith("rsc"):
         for name in ("update_world_model", "_sac_step"):
-            _clocked(model, name, clock)
+            clock_method(model, name, clock)
     model.learn(args.start + args.warmup)  # untimed
     clock.clear()
     began = time.perf_counter()

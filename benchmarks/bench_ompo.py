@@ -24,6 +24,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
+from _common import clock_method
 from calibrate import line, step_us
 from stable_baselines3 import SAC
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -41,20 +42,6 @@ COMMON: dict[str, Any] = {
     "device": "cpu",
     "verbose": 0,
 }
-
-
-def _timed(obj: Any, name: str, clock: dict[str, float]) -> None:
-    """Wrap method `name` of `obj` so its wall time accumulates in ``clock[name]``."""
-    inner = getattr(obj, name)
-
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        start = time.perf_counter()
-        try:
-            return inner(*args, **kwargs)
-        finally:
-            clock[name] += time.perf_counter() - start
-
-    setattr(obj, name, wrapper)
 
 
 def rate(kind: str, env_id: str, start: int, steps: int, seed: int) -> tuple[float, dict]:
@@ -76,8 +63,8 @@ def rate(kind: str, env_id: str, start: int, steps: int, seed: int) -> tuple[flo
     clock: dict[str, float] = defaultdict(float)
     if kind == "ompo":
         for name in ("train_discriminator", "critic_loss", "_actor_step"):
-            _timed(model, name, clock)
-    _timed(model, "train", clock)  # SB3 calls self.train(...): the instance attribute wins
+            clock_method(model, name, clock)
+    clock_method(model, "train", clock)  # SB3 calls self.train(...): the instance attribute wins
     model.learn(start)  # the random steps, untimed
     clock.clear()
     began = time.perf_counter()

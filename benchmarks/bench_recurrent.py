@@ -28,6 +28,7 @@ from typing import Any
 
 import gymnasium as gym
 import torch
+from _common import median_span
 from calibrate import line, step_us
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
@@ -82,8 +83,7 @@ def main() -> None:
     print(f"calibration before: {line(before, 5_000, 3)}")
     print(f"{'learner':<14} {'steps/s':>8} {'/ ppo (median, min-max)':>26}")
     for name, values in rates.items():
-        ratios = [v / p for v, p in zip(values, rates["ppo"], strict=True)]
-        span = f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})"
+        span = median_span(values, rates["ppo"])
         print(f"{name:<14} {statistics.median(values):>8.0f} {span:>26}")
     print(f"calibration after: {line(after, 5_000, 3)}")
 
