@@ -21,8 +21,10 @@ def test_a_checkpoint_gets_its_strongest_searched_adversary(
     args += ["--workers", "1", "--budgets", "--adversaries", "nominal", "--exploitability", "256"]
     assert main([*args, "--checkpoint", f"ppo={pendulum_ppo}:ppo", "--raw-obs", "ppo"]) == 0
     search = json.loads((out / "optimal.json").read_text())["ppo"]
-    assert len(search["candidates"]) == len(OPTIMAL_GRID)
-    assert [c["hparams"] for c in search["candidates"]] == [dict(g) for g in OPTIMAL_GRID]
+    # a feed-forward protagonist: every entry but the LSTM adversary (recurrent victims only)
+    offered = [dict(g) for g in OPTIMAL_GRID if g.get("victims", "all") == "all"]
+    assert len(offered) == len(OPTIMAL_GRID) - 1
+    assert [c["hparams"] for c in search["candidates"]] == offered
     # the search's own keys reach the trainer: 4 views for the SB3 recipe, 5x the steps for the
     # long candidate; the others train one view for --exploitability steps
     from stable_baselines3 import PPO
@@ -74,14 +76,22 @@ def test_the_long_candidate_trains_first_with_its_scaled_budget(
     victim = {"ppo": SB3Checkpoint(str(pendulum_ppo), "ppo", None)}
     with pytest.raises(RuntimeError, match="captured"):
         _search("InvertedPendulum-v5", threat, agent, victim, OptimalSearch(steps=1000), tmp_path)
-    scales = [g.get("steps_scale", 1) for g in OPTIMAL_GRID]
+    scales = [g.get("steps_scale", 1) for g in OPTIMAL_GRID if "victims" not in g]
     assert [u.steps for u in units] == sorted((1000 * s for s in scales), reverse=True)
     assert units[0].hparams["n_envs"] == 4 and "steps_scale" not in units[0].hparams
+    assert all(u.algo == "ppo" and not {"algo", "victims"} & set(u.hparams) for u in units)
     assert units[0].name == f"ppo/{scales.index(max(scales))}"  # its index, not its position
 
 
 @pytest.mark.parametrize(
-    "bad", [{"steps": 0}, {"steps": 10, "grid": ()}, {"steps": 10, "select_seeds": 0}]
+    "bad",
+    [
+        {"steps": 0},
+        {"steps": 10, "grid": ()},
+        {"steps": 10, "select_seeds": 0},
+        {"steps": 10, "grid": ({"algo": "sac"},)},
+        {"steps": 10, "grid": ({"victims": "lstm"},)},
+    ],
 )
 def test_bad_searches_are_config_errors(bad: dict) -> None:
     with pytest.raises(ConfigError, match="OptimalSearch"):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import csv
+import json
 from pathlib import Path
 from typing import Any
 
@@ -306,12 +307,17 @@ def test_every_attack_column_plays_a_recurrent_protagonist_from_the_cli(
 def test_the_searched_optimal_attack_trains_against_a_recurrent_protagonist(
     lstm_run: Path, tmp_path: Path
 ) -> None:
+    from sb3_contrib import RecurrentPPO
+
     from advgame.evaluation.attacks.optimal import OPTIMAL, OptimalSearch, optimal_jobs
     from advgame.evaluation.table.protagonists import run_protagonist
 
     cfg, spec = run_protagonist(lstm_run)
     assert spec.algo == "recurrent-ppo"
-    search = OptimalSearch(steps=64, grid=({"n_steps": 64, "batch_size": 32},), select_seeds=1)
+    small = {"n_steps": 64, "batch_size": 32}
+    lstm = {**small, "lstm_hidden_size": 8, "algo": "recurrent-ppo", "victims": "recurrent"}
+    search = OptimalSearch(steps=64, grid=(small, lstm), select_seeds=1)
+    mlp = SB3Checkpoint(str(lstm_run / "no-such-model.zip"), "ppo", None)  # never trained on
     jobs = optimal_jobs(
         "Hopper-v5", cfg.preset, ADV, {"lstm": spec}, search, tmp_path, seeds=(0, 1)
     )
@@ -319,6 +325,15 @@ def test_the_searched_optimal_attack_trains_against_a_recurrent_protagonist(
     rows = [r for r in table.rows if r["adversary"] == OPTIMAL]
     assert len(rows) == 2 and all(r["clipped"] == 0 and r["length"] > 0 for r in rows)
     assert list((tmp_path / "optimal" / "lstm" / "0").glob("*.zip"))
+    # the LSTM candidate, as ATLA attacks its LSTM agents: a RecurrentPPO adversary
+    (adversary,) = (tmp_path / "optimal" / "lstm" / "1").glob("*.zip")
+    assert RecurrentPPO.load(adversary, device="cpu").policy.lstm_hidden_state_shape[-1] == 8
+    found = json.loads((tmp_path / "optimal.json").read_text())["lstm"]["candidates"]
+    assert [c["hparams"].get("algo", "ppo") for c in found] == ["ppo", "recurrent-ppo"]
+    # a protagonist without memory is not offered the LSTM candidate
+    from advgame.evaluation.attacks.optimal import _applies
+
+    assert _applies(lstm, spec) and not _applies(lstm, mlp) and _applies(small, mlp)
 
 
 def test_max_cost_plays_a_recurrent_protagonist_on_a_safe_task(tmp_path: Path) -> None:

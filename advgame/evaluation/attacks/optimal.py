@@ -56,21 +56,41 @@ OPTIMAL_GRID: tuple[dict[str, Any], ...] = (
     SB3_RECIPE,
     {**SB3_RECIPE, "learning_rate": 1e-3},
     {"learning_rate": 3e-3, "ent_coef": 0.0, "clip_range": 0.4, "vf_coef": 0.5},
-)
+    {**SB3_RECIPE, "learning_rate": 1e-3, "batch_size": 1024, "algo": "recurrent-ppo",
+     "victims": "recurrent"},
+)  # fmt: skip
 """The adversaries tried per protagonist; the strongest on the selection seeds is kept.
 
 Each entry is PPO overrides (`advgame.agents.PPOConfig` fields) plus two keys of the search:
-``n_envs`` (views trained on at once, default 1) and ``steps_scale`` (this candidate trains
-``steps_scale`` times the search's steps, default 1). Entries 0-3 are the first grid (learning
-rate, entropy bonus, clip; annealed learning rate); 4-6 the outside SB3 recipe (`SB3_RECIPE`),
-once five times as long (ATLA trains each attack about 1M steps), once as long as the rest and
-once at ATLA's middle learning rate; 7 ATLA's high-learning-rate, wide-clip corner (its
-Hopper scan, ``configs/attack_ppo_hopper_scan.py`` of ATLA's code). Entries keep their index
+``n_envs`` (views trained on at once, default 1), ``steps_scale`` (this candidate trains
+``steps_scale`` times the search's steps, default 1), ``algo`` (the adversary's learner,
+``"ppo"`` by default or ``"recurrent-ppo"``) and ``victims`` (``"all"`` by default, or
+``"recurrent"``: only protagonists with memory get this candidate). Entries 0-3 are the first
+grid (learning rate, entropy bonus, clip; annealed learning rate); 4-6 the outside SB3 recipe
+(`SB3_RECIPE`), once five times as long (ATLA trains each attack about 1M steps), once as long
+as the rest and once at ATLA's middle learning rate; 7 ATLA's high-learning-rate, wide-clip
+corner (its Hopper scan, ``configs/attack_ppo_hopper_scan.py`` of ATLA's code); 8, for
+recurrent protagonists only, an LSTM adversary, as ATLA attacks its LSTM agents (its
+``configs/attack_lstm_ppo_hopper_scan.py``: the adversary is the agent's LSTM policy class, at
+learning rates 1e-3 to 1e-2): the recipe at 1e-3 with 1,024-step minibatches of sequences, so
+that it can read the victim's memory from the episode so far. Entries keep their index
 (a candidate's part file is named by its index and settings), so new ones go at the end; the
 long candidate trains first (strongest first: a search cut short still has it)."""
 
-SEARCH_KEYS = ("n_envs", "steps_scale")
+SEARCH_KEYS = ("n_envs", "steps_scale", "algo", "victims")
 """Grid keys read by the search, not by the learner config."""
+_ALGOS, _VICTIMS = ("ppo", "recurrent-ppo"), ("all", "recurrent")
+
+
+def _recurrent(spec: Any) -> bool:
+    """Whether a protagonist spec (or every spec of a team's mapping) plays with memory."""
+    specs = spec.values() if isinstance(spec, Mapping) else [spec]
+    return all(getattr(s, "algo", None) in ("recurrent-ppo", "sa-recurrent-ppo") for s in specs)
+
+
+def _applies(entry: Mapping[str, Any], spec: Any) -> bool:
+    """Whether grid `entry` is a candidate against the protagonist `spec`."""
+    return entry.get("victims", "all") == "all" or _recurrent(spec)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -97,11 +117,16 @@ class OptimalSearch:
         if not self.grid or not all(isinstance(g, Mapping) for g in self.grid):
             raise ConfigError(f"OptimalSearch.grid must be PPO override dicts, got {self.grid!r}.")
         for g in self.grid:
-            for key in SEARCH_KEYS:
+            for key in ("n_envs", "steps_scale"):
                 value = g.get(key, 1)
                 if type(value) is not int or value < 1:
                     raise ConfigError(
                         f"OptimalSearch.grid entry {dict(g)!r}: {key} must be an int >= 1."
+                    )
+            for key, allowed in (("algo", _ALGOS), ("victims", _VICTIMS)):
+                if g.get(key, allowed[0]) not in allowed:
+                    raise ConfigError(
+                        f"OptimalSearch.grid entry {dict(g)!r}: {key} must be one of {allowed}."
                     )
         if type(self.select_seeds) is not int or self.select_seeds < 1:
             raise ConfigError(
@@ -204,12 +229,15 @@ def _search(
         specs = dict(spec) if isinstance(spec, Mapping) else dict.fromkeys(ids, spec)
         opponents = {a: MixtureSpec((s,), (1.0,)) for a, s in specs.items()}
         for k, entry in enumerate(search.grid):
-            hparams = {key: v for key, v in entry.items() if key != "steps_scale"}
+            if not _applies(entry, spec):
+                continue
+            hparams = {key: v for key, v in entry.items() if key not in SEARCH_KEYS[1:]}
             units.append(
                 BestResponseJob(
                     name=f"{name}/{k}", scenario=scenario, make_kwargs={"preset": threat},
-                    agent=agent, hparams=hparams, opponents=opponents,
-                    steps=search.steps * int(entry.get("steps_scale", 1)), seed=search.seed + k,
+                    agent=agent, algo=entry.get("algo", "ppo"), hparams=hparams,
+                    opponents=opponents, seed=search.seed + k,
+                    steps=search.steps * int(entry.get("steps_scale", 1)),
                 )
             )  # fmt: skip
             where.append((name, k))
@@ -232,23 +260,22 @@ def _search(
             str(folder / norm) if norm else None,
             deterministic=True,
         )
-    cands = {name: [ks[k] for k in sorted(ks)] for name, ks in by_index.items()}
     select = tuple(range(10_000, 10_000 + search.select_seeds))  # apart from the table's seeds
     jobs = [
         EvalJob(scenario=scenario, make_kwargs={"preset": threat}, protagonist=name,
                 protagonist_spec=protagonists[name], adversary=f"candidate {k}",
                 adversary_specs={agent: c}, seeds=select)
-        for name, cs in cands.items() for k, c in enumerate(cs)
+        for name, ks in by_index.items() for k, c in sorted(ks.items())
     ]  # fmt: skip
     table = evaluate(jobs, progress=False)
     found = {}
-    for name, cs in cands.items():
-        means = [float(np.mean(table.values(name, f"candidate {k}"))) for k in range(len(cs))]
-        best = int(np.argmin(means))
-        found[name] = _Found(cs[best])
+    for name, ks in by_index.items():
+        means = {k: float(np.mean(table.values(name, f"candidate {k}"))) for k in sorted(ks)}
+        best = min(means, key=means.__getitem__)  # the first of equals, as argmin
+        found[name] = _Found(ks[best])
         found[name].candidates = [
-            {"hparams": dict(g), "selection_return": m, "kept": k == best}
-            for k, (g, m) in enumerate(zip(search.grid, means, strict=True))
+            {"hparams": dict(search.grid[k]), "selection_return": m, "kept": k == best}
+            for k, m in means.items()
         ]
     return found
 
