@@ -238,6 +238,23 @@ def test_training_views_ask_a_frozen_lstms_copies_in_one_pass(
     assert not torch.equal(memories[True][0][0], memories[True][1][0])  # three different games
 
 
+def test_a_released_lstm_adversary_loads_as_an_lstm(outside: Path, tmp_path: Path) -> None:
+    from advgame.workflows import zoo
+
+    entry = zoo.ZooEntry(
+        id="hopper/atla-lstm", scenario="Hopper-v5", method="atla-lstm", steps=512, seed=0,
+        natural_return=0.0, worst_attack_return=0.0, worst_attack="attack optimal",
+        threat="atla", algo="recurrent-ppo",
+    )  # fmt: skip
+    model = outside / "model.zip"
+    zoo.release(entry, {"protagonist": model, "adversary": model}, tmp_path)
+    adversary = zoo.load(entry.id, tmp_path, adversary=True)
+    assert adversary.algo == "recurrent-ppo"  # not refused as a PPO zip
+    assert isinstance(build_policies(advgame.make("Hopper-v5"), {"protagonist": adversary})[
+        "protagonist"], RecurrentSB3Policy)  # fmt: skip
+    assert zoo.load(entry.id, tmp_path).algo == "recurrent-ppo"
+
+
 def test_a_checkpoint_loaded_as_the_wrong_kind_is_refused_clearly(outside: Path) -> None:
     with pytest.raises(ConfigError, match="recurrent-ppo"):
         load_model(str(outside / "model.zip"), "ppo")
