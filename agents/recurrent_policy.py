@@ -119,8 +119,11 @@ class RecurrentSB3Policy(SB3Policy):
 
         self._prepare()
         x = torch.as_tensor(self._normalize(np.asarray(observations)))
-        h = torch.cat([p._actor[0] for p in policies], dim=1)
-        c = torch.cat([p._actor[1] for p in policies], dim=1)
+        # through methods, not attributes: a wrapper that forwards to its policy (a mixture
+        # drawing one per episode) then reads and writes the memory of the policy it plays
+        memories = [p._memory() for p in policies]
+        h = torch.cat([m[0] for m in memories], dim=1)
+        c = torch.cat([m[1] for m in memories], dim=1)
         with torch.no_grad():
             actions, (h, c) = self.model.policy._predict(
                 x,
@@ -129,9 +132,17 @@ class RecurrentSB3Policy(SB3Policy):
                 deterministic=self.deterministic,
             )
         for i, p in enumerate(policies):
-            p._actor = (h[:, i : i + 1].clone(), c[:, i : i + 1].clone())
-            p._seen.append(x[i : i + 1])
+            p._advanced((h[:, i : i + 1].clone(), c[:, i : i + 1].clone()), x[i : i + 1])
         return self._in_box(actions.cpu().numpy().reshape((-1, *self.model.action_space.shape)))
+
+    def _memory(self) -> tuple[Any, Any]:
+        """The actor's memory ``(h, c)`` it acts with next."""
+        return self._actor
+
+    def _advanced(self, actor: tuple[Any, Any], row: Any) -> None:
+        """Hold the actor's memory after acting on the normalized input `row`."""
+        self._actor = actor
+        self._seen.append(row)
 
     def act(self, observation: Any) -> Any:
         """The action for one raw observation; the memory then holds it."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -195,15 +196,20 @@ def test_a_frozen_recurrent_protagonist_resets_its_memory_in_an_adversary_view(
     assert victim._seen == [] and not torch.any(victim.hidden_state()["actor"][0])
 
 
+@pytest.mark.parametrize("mixture", [False, True])
 def test_training_views_ask_a_frozen_lstms_copies_in_one_pass(
-    outside: Path, monkeypatch: pytest.MonkeyPatch
+    outside: Path, monkeypatch: pytest.MonkeyPatch, mixture: bool
 ) -> None:
+    """Also behind a mixture (the optimal search's and PSRO's opponents), across a reset."""
     from advgame.core.vector import VectorView
     from advgame.core.views import view_factory
+    from advgame.training.best_response import MixtureSpec
 
-    spec = SB3Checkpoint(
+    spec: Any = SB3Checkpoint(
         str(outside / "model.zip"), "recurrent-ppo", str(outside / "vecnormalize.pkl")
     )
+    if mixture:
+        spec = MixtureSpec((spec,), (1.0,))
     fns = [
         view_factory("Hopper-v5", "observation_adversary", {"protagonist": spec}, preset="atla")
     ] * 3
@@ -223,11 +229,16 @@ def test_training_views_ask_a_frozen_lstms_copies_in_one_pass(
     memories = {}
     for exact in (True, False):
         venv = VectorView(fns, exact=exact)
+        noop = np.zeros((3, *venv.action_space.shape), dtype=np.float32)
+        venv.seed(0)
+        venv.reset()
+        for _ in range(5):  # then a new episode everywhere: every memory starts from zero
+            venv.step(noop)
         venv.seed(0)
         venv.reset()
         calls.update(group=0, act=0)
         for _ in range(8):
-            venv.step(np.zeros((3, *venv.action_space.shape), dtype=np.float32))
+            venv.step(noop)
         memories[exact] = [v.policies["protagonist"].hidden_state()["actor"] for v in venv.envs]
         steps = [len(v.policies["protagonist"]._seen) for v in venv.envs]
         assert steps == [8, 8, 8]  # one memory step per environment step, per copy
