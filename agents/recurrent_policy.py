@@ -105,8 +105,7 @@ class RecurrentSB3Policy(SB3Policy):
         Only callers that accept last-bit differences from play alone use it (training
         rollouts: `advgame.core.policy.act_batch` with ``exact=False``).
         """
-        stats = (id(self._stats[0]), id(self._stats[1]), self.clip_obs)
-        return ("recurrent", id(self.model), *stats, self.deterministic)
+        return ("recurrent", *self._network_key())
 
     def act_group(self, policies: Any, observations: np.ndarray) -> Any:
         """``policies[i].act(observations[i])`` for copies of this network, in one LSTM pass.
@@ -117,23 +116,16 @@ class RecurrentSB3Policy(SB3Policy):
         """
         import torch
 
-        self._prepare()
         x = torch.as_tensor(self._normalize(np.asarray(observations)))
         # through methods, not attributes: a wrapper that forwards to its policy (a mixture
         # drawing one per episode) then reads and writes the memory of the policy it plays
         memories = [p._memory() for p in policies]
         h = torch.cat([m[0] for m in memories], dim=1)
         c = torch.cat([m[1] for m in memories], dim=1)
-        with torch.no_grad():
-            actions, (h, c) = self.model.policy._predict(
-                x,
-                lstm_states=(h, c),
-                episode_starts=torch.zeros(len(policies)),
-                deterministic=self.deterministic,
-            )
+        actions, (h, c) = self._forward(x, (h, c))
         for i, p in enumerate(policies):
             p._advanced((h[:, i : i + 1].clone(), c[:, i : i + 1].clone()), x[i : i + 1])
-        return self._in_box(actions.cpu().numpy().reshape((-1, *self.model.action_space.shape)))
+        return actions
 
     def _memory(self) -> tuple[Any, Any]:
         """The actor's memory ``(h, c)`` it acts with next."""
@@ -164,18 +156,25 @@ class RecurrentSB3Policy(SB3Policy):
         """``RecurrentPPO.predict``'s operations for one normalized row, advancing the memory."""
         import torch
 
-        self._prepare()
-        policy = self.model.policy
         x = torch.as_tensor(obs)
+        actions, self._actor = self._forward(x, self._actor)
+        self._seen.append(x)
+        return actions
+
+    def _forward(self, x: Any, memory: tuple[Any, Any]) -> tuple[Any, tuple[Any, Any]]:
+        """The actions in the box for normalized rows `x` from `memory`, and the memory after."""
+        import torch
+
+        self._prepare()
         with torch.no_grad():
-            actions, self._actor = policy._predict(
+            actions, memory = self.model.policy._predict(
                 x,
-                lstm_states=self._actor,
-                episode_starts=torch.zeros(1),
+                lstm_states=memory,
+                episode_starts=torch.zeros(len(x)),
                 deterministic=self.deterministic,
             )
-        self._seen.append(x)
-        return self._in_box(actions.cpu().numpy().reshape((-1, *self.model.action_space.shape)))
+        shape = self.model.action_space.shape
+        return self._in_box(actions.cpu().numpy().reshape((-1, *shape))), memory
 
     # -- white-box access: the carried state, never advanced here -------------------------------
     @staticmethod

@@ -135,9 +135,13 @@ class SB3Policy:
         self._sampler = forward if gaussian and hasattr(policy, "mlp_extractor") else None
         self._key = None  # no lean forward pass: act row by row
         if (self._head if self.deterministic else self._sampler) is not None:
-            stats = (id(self._stats[0]), id(self._stats[1]), self.clip_obs)
-            self._key = (id(self.model), *stats, self.deterministic)
+            self._key = self._network_key()
         self._ready = True
+
+    def _network_key(self) -> tuple:
+        """Equal for copies of one frozen network behind one normalizer, acting alike."""
+        stats = (id(self._stats[0]), id(self._stats[1]), self.clip_obs)
+        return (id(self.model), *stats, self.deterministic)
 
     def _predict(self, obs: np.ndarray) -> Any:
         """SB3's ``predict`` for a batch of normalized observations, without its checks.

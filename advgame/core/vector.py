@@ -13,14 +13,14 @@ games are alike (one scenario and set-up) the group's move is made by
 `advgame.core.lockstep.play_all`: each adversary's actions decoded, the perturbations applied
 and the protagonist's actions checked once over ``[N, ...]``; otherwise game by game.
 
-So every episode is the one N single views would play with the same seeds (with
-``exact=False``, the training loop's choice, the copies of a frozen LSTM opponent are asked
-in one batched pass too, whose rows may differ from play alone in the last bit: the same
-distribution of episodes, not the same episodes) (``seed(s)`` gives
+So every episode is the one N single views would play with the same seeds (``seed(s)`` gives
 view ``i`` the seed ``s + i`` as SB3 does; autoreset, ``terminal_observation``,
 ``TimeLimit.truncated`` and the per-view ``clipped`` counters are `DummyVecEnv`'s), while a
 learned adversary costs one forward pass per step instead of N. A single view is the N = 1
-case of the same phases. ``tests/test_vector.py`` pins the equivalence. `GymVectorView` shows
+case of the same phases. ``tests/test_vector.py`` pins the equivalence. With
+``exact=False`` (the training loop's choice) the copies of a frozen LSTM opponent are asked in
+one batched pass too, whose rows may differ from play alone in the last bit: the same
+distribution of episodes, not the same episodes. `GymVectorView` shows
 the same lockstep views as a Gymnasium `VectorEnv`.
 """
 

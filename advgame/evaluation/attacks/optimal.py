@@ -85,7 +85,7 @@ _ALGOS, _VICTIMS = ("ppo", "recurrent-ppo"), ("all", "recurrent")
 def _recurrent(spec: Any) -> bool:
     """Whether a protagonist spec (or every spec of a team's mapping) plays with memory."""
     specs = spec.values() if isinstance(spec, Mapping) else [spec]
-    return all(getattr(s, "algo", None) in ("recurrent-ppo", "sa-recurrent-ppo") for s in specs)
+    return all(getattr(s, "algo", None) == "recurrent-ppo" for s in specs)  # SA-LSTM saves so
 
 
 def _applies(entry: Mapping[str, Any], spec: Any) -> bool:
