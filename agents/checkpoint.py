@@ -30,6 +30,7 @@ __all__ = [
     "SB3Policy",
     "load_model",
     "load_normalizer",
+    "saved_recurrent",
 ]
 
 ALGOS = ("ppo", "sac", "td3", "ompo", "dbc", "rsc", "recurrent-ppo")
@@ -65,7 +66,7 @@ def load_model(path: str, algo: str) -> Any:
         "replay_buffer_class": None,
         "replay_buffer_kwargs": {},
     }  # only where saved (SAC/TD3)
-    recurrent = _saved_recurrent(path)
+    recurrent = saved_recurrent(path)
     if recurrent is not None and recurrent != (algo == "recurrent-ppo"):
         saved = "RecurrentPPO's LSTM policy" if recurrent else "a feed-forward policy"
         raise ConfigError(
@@ -78,10 +79,15 @@ def load_model(path: str, algo: str) -> Any:
         return cls.load(path, device="cpu", custom_objects=plain)
 
 
-def _saved_recurrent(path: str) -> bool | None:
+def saved_recurrent(path: str) -> bool | None:
     """Whether the SB3 zip at `path` saved an sb3-contrib recurrent policy (None: unreadable).
 
-    Read from the zip's ``data`` record (the policy class's module), without loading torch.
+    Read from the zip's ``data`` record (the policy class's module), without loading torch, so
+    a caller can pick ``algo="recurrent-ppo"`` or ``"ppo"`` before loading.
+
+    Example:
+        ``SB3Checkpoint(path, "recurrent-ppo" if saved_recurrent(path) else "ppo")``
+
     """
     import json
     import zipfile

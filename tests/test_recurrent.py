@@ -19,7 +19,7 @@ import torch
 
 import advgame
 from advgame.agents import LEARNERS, PPOConfig
-from advgame.agents.checkpoint import SB3Checkpoint, load_model
+from advgame.agents.checkpoint import SB3Checkpoint, load_model, saved_recurrent
 from advgame.agents.recurrent import RecurrentPPOConfig
 from advgame.agents.recurrent_policy import RecurrentSB3Policy
 from advgame.cli import main
@@ -264,6 +264,19 @@ def test_a_released_lstm_adversary_loads_as_an_lstm(outside: Path, tmp_path: Pat
     assert isinstance(build_policies(advgame.make("Hopper-v5"), {"protagonist": adversary})[
         "protagonist"], RecurrentSB3Policy)  # fmt: skip
     assert zoo.load(entry.id, tmp_path).algo == "recurrent-ppo"
+
+
+def test_saved_recurrent_reads_the_kind_from_the_zip(outside: Path, tmp_path: Path) -> None:
+    from stable_baselines3 import PPO
+
+    plain = tmp_path / "plain.zip"
+    PPO("MlpPolicy", "Pendulum-v1", n_steps=64, device="cpu").save(plain)
+    damaged = tmp_path / "damaged.zip"
+    damaged.write_bytes(b"not a zip")
+    assert saved_recurrent(str(outside / "model.zip")) is True
+    assert saved_recurrent(str(plain)) is False
+    assert saved_recurrent(str(damaged)) is None  # the load itself reports the damage
+    assert saved_recurrent(str(tmp_path / "missing.zip")) is None
 
 
 def test_a_checkpoint_loaded_as_the_wrong_kind_is_refused_clearly(outside: Path) -> None:

@@ -168,7 +168,7 @@ def load(entry_id: str, root: str | Path | None = None, *, adversary: bool = Fal
     `advgame.evaluation.run_protagonist` gives it. The files are checked against the
     manifest's sha256 first.
     """
-    from advgame.agents.checkpoint import SB3Checkpoint, _saved_recurrent
+    from advgame.agents.checkpoint import SB3Checkpoint, saved_recurrent
     from advgame.training import TEAM_ALGOS
 
     base = Path(root) if root is not None else default_root()
@@ -180,7 +180,7 @@ def load(entry_id: str, root: str | Path | None = None, *, adversary: bool = Fal
         f = entry.files["adversary"]
         norm = entry.files.get("adversary_normalizer")
         path = str(base / f["path"])  # a PPO adversary, or an LSTM one (ATLA-LSTM's, issue 40)
-        algo = "recurrent-ppo" if _saved_recurrent(path) else "ppo"
+        algo = "recurrent-ppo" if saved_recurrent(path) else "ppo"
         return SB3Checkpoint(path, algo, str(base / norm["path"]) if norm else None)
     if entry.algo in TEAM_ALGOS:
         from advgame.evaluation.table.protagonists import team_protagonist
