@@ -179,3 +179,22 @@ def test_a_run_killed_between_members_and_population_resumes_without_redoing(
     redone = sorted(k for k, v in before.items() if k.startswith("checkpoints/") and after[k] != v)
     assert not redone, f"checkpoint files written again: {redone}"
     assert [m["iteration"] for m in load_meta(run)] == [0, 1]
+
+
+@pytest.mark.parametrize("algo", ["ompo", "dbc", "rsc"])
+def test_the_papers_off_policy_baselines_train_as_psro_protagonists(
+    algo: str, tmp_path: Path
+) -> None:
+    """Each best response is the named learner, saved and played back as that learner."""
+    small = {"net_arch": [16, 16], "learning_starts": 32, "batch_size": 16}
+    if algo == "dbc":
+        small |= {"feature_dim": 8, "encoder_arch": [16], "model_width": 16}
+    cfg = PSROConfig(scenario="InvertedPendulum-v5", preset="rarl", iterations=1,
+                     protagonist_steps=64, adversary_steps=64, protagonist_algo=algo,
+                     protagonist_hparams=small, adversary_hparams={"n_steps": 32, "batch_size": 32},
+                     eval_seeds=1, max_episode_steps=20)  # fmt: skip
+    run = run_psro(cfg, tmp_path / "run")
+    protagonists = [m for m in Population.load(run / "population.json") if m.agent == "protagonist"]
+    assert [m.spec.algo for m in protagonists] == [algo, algo]
+    assert all(Path(m.spec.path).is_file() for m in protagonists)
+    assert np.isfinite(np.array(load_meta(run)[-1]["matrix"])).all()  # played back as `algo`

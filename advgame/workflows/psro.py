@@ -62,8 +62,9 @@ class PSROConfig:
     """Steps of each protagonist best response."""
     adversary_steps: int = 2048
     """Steps of each adversary best response."""
-    protagonist_algo: Literal["ppo", "sac", "td3", "recurrent-ppo"] = "ppo"
-    """Protagonist learner (SB3, or sb3-contrib's LSTM PPO)."""
+    protagonist_algo: Literal["ppo", "sac", "td3", "recurrent-ppo", "ompo", "dbc", "rsc"] = "ppo"
+    """Protagonist learner: SB3's, sb3-contrib's LSTM PPO, or one of the paper's off-policy robust
+    baselines (OMPO, DBC, RSC; continuous actions only, refused before training otherwise)."""
     adversary_algo: Literal["ppo", "sac", "recurrent-ppo"] = "ppo"
     """Adversary learner (SB3, or sb3-contrib's LSTM PPO)."""
     protagonist_hparams: dict[str, Any] | None = None
