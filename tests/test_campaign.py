@@ -134,6 +134,40 @@ def test_a_bad_evaluate_section_is_refused_before_anything_trains(tmp_path: Path
     assert load_campaign(bad).threat == "default"  # runs named by columns may come later
 
 
+def test_optimal_grid_overrides_reach_the_search_and_bad_ones_are_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 36: a campaign lengthens one candidate of the search (Walker2d's long recipe)."""
+    from advgame.evaluation.attacks.optimal import OPTIMAL_GRID
+    from advgame.workflows import campaign as campaign_module
+    from advgame.workflows import suite
+
+    head = 'scenario = "Hopper-v5"\nmethods = ["ppo"]\n[evaluate]\nexploitability = 100\n'
+    path = tmp_path / "c.toml"
+    path.write_text(head + "optimal_grid = { 4 = { steps_scale = 10 } }\n")
+    campaign = load_campaign(path)
+    grid = campaign.search_grid()
+    assert grid is not None and grid[4] == {**OPTIMAL_GRID[4], "steps_scale": 10}
+    assert grid[:4] == OPTIMAL_GRID[:4] and grid[5:] == OPTIMAL_GRID[5:]  # the rest read back
+    assert OPTIMAL_GRID[4]["steps_scale"] == 5  # the default grid is not changed in place
+    seen = {}
+    monkeypatch.setattr(suite, "evaluate_runs", lambda runs, out, **kw: seen.update(kw))
+    campaign_module._evaluate(campaign, tmp_path, [], 1, "local", None, False)
+    assert seen["optimal_grid"] == grid and seen["exploitability_steps"] == 100
+    path.write_text(head)
+    assert load_campaign(path).search_grid() is None  # no override: OPTIMAL_GRID
+    for text, words in [
+        ("optimal_grid = { 99 = { steps_scale = 2 } }", "OPTIMAL_GRID index"),
+        ("optimal_grid = { x = { steps_scale = 2 } }", "OPTIMAL_GRID index"),
+        ("optimal_grid = { 4 = 10 }", "a table of overrides"),
+        ("optimal_grid = { 4 = { steps_scale = 0 } }", "steps_scale must be an int >= 1"),
+        ('optimal_grid = { 4 = { algo = "sac" } }', "algo must be one of"),
+    ]:
+        path.write_text(head + text + "\n")
+        with pytest.raises(ConfigError, match=words):
+            load_campaign(path)
+
+
 def test_a_variant_trains_as_its_method_with_its_own_fields(tmp_path: Path) -> None:
     path = tmp_path / "variants.toml"
     path.write_text(
@@ -158,6 +192,7 @@ def test_the_campaign_file_in_the_docs_loads(tmp_path: Path) -> None:
     campaign = load_campaign(tmp_path / "doc.toml")
     assert campaign.base_method("atla-wide") == "atla"
     assert campaign.config("atla-wide-s0").train_budget_scale == 2.0
+    assert campaign.search_grid()[4]["steps_scale"] == 10
 
 
 def test_the_zoo_campaign_files_load() -> None:

@@ -29,6 +29,7 @@ varies, and the rest of the section is the variation (a training preset, hyper-p
     threat = "atla"
     seeds = 10
     exploitability = 0         # steps of the searched optimal attack (0: none)
+    optimal_grid = { 4 = { steps_scale = 10 } }  # overrides of OPTIMAL_GRID entries, by index
     cost_limit = 25            # safe scenarios: add the cost table (episode cost ≤ limit)
 
 `run_campaign` trains every run that is not finished, two (``workers``) at a time as jobs on
@@ -219,6 +220,7 @@ def _evaluate(
             seeds=campaign.eval_seeds,
             workers=workers,
             exploitability_steps=campaign.exploitability,
+            optimal_grid=campaign.search_grid(),
             adversaries=campaign.adversaries,
             threat=campaign.threat,
             budgets=(),

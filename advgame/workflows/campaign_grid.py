@@ -52,6 +52,10 @@ class Campaign:
     """Steps of each candidate of the searched optimal attack (0: no optimal column)."""
     cost_limit: float | None = None
     """Episode cost limit of a safe campaign: adds the cost table (None: no cost table)."""
+    optimal_grid: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    """Overrides of `advgame.evaluation.attacks.optimal.OPTIMAL_GRID` entries, by index (a TOML
+    key such as ``4``): ``{"4": {"steps_scale": 10}}`` trains the long recipe candidate 10 times
+    the search's steps. Entries keep their index, so the others' part files are read back."""
 
     def __post_init__(self) -> None:
         from advgame.training import METHODS
@@ -85,9 +89,36 @@ class Campaign:
             isinstance(limit, bool) or not isinstance(limit, int | float) or not limit >= 0
         ):
             raise ConfigError(f"evaluate.cost_limit must be a number >= 0, got {limit!r}.")
+        self.search_grid()  # refuses a bad override before anything trains
         for name in self.runs():  # every TrainConfig is checked before anything runs
             self.config(name)
         self._check_evaluation()
+
+    def search_grid(self) -> tuple[Mapping[str, Any], ...] | None:
+        """The optimal attack's grid with `optimal_grid`'s overrides (None: no override)."""
+        from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch
+
+        if not self.optimal_grid:
+            return None
+        if not isinstance(self.optimal_grid, Mapping):
+            raise ConfigError(
+                f"evaluate.optimal_grid must be a table of entry index = {{overrides}}, got "
+                f"{self.optimal_grid!r}."
+            )
+        grid = [dict(g) for g in OPTIMAL_GRID]
+        for key, change in self.optimal_grid.items():
+            index = int(key) if str(key).isdigit() else -1
+            if not 0 <= index < len(grid) or not isinstance(change, Mapping):
+                raise ConfigError(
+                    f"evaluate.optimal_grid: {key!r} = {change!r} must be an OPTIMAL_GRID index "
+                    f"(0 to {len(grid) - 1}) = a table of overrides, e.g. 4 = {{ steps_scale = 10 }}."
+                )
+            grid[index].update(change)
+        try:
+            OptimalSearch(steps=max(self.exploitability, 1), grid=tuple(grid))
+        except ConfigError as exc:
+            raise ConfigError(f"evaluate.optimal_grid: {exc}") from None
+        return tuple(grid)
 
     def _check_evaluation(self) -> None:
         """The [evaluate] section as the evaluation will read it, hours of training earlier."""
@@ -154,7 +185,8 @@ def load_campaign(path: str | Path) -> Campaign:
         m: train.pop(m) for m in list(train) if isinstance(train[m], dict) and m in methods
     }
     ev = dict(data.get("evaluate", {}))
-    unknown = set(ev) - {"adversaries", "threat", "seeds", "exploitability", "cost_limit"}
+    known_ev = {"adversaries", "threat", "seeds", "exploitability", "cost_limit", "optimal_grid"}
+    unknown = set(ev) - known_ev
     if unknown:
         raise ConfigError(f"{path}: unknown [evaluate] keys {sorted(unknown)}.")
     return Campaign(
@@ -168,6 +200,7 @@ def load_campaign(path: str | Path) -> Campaign:
         eval_seeds=ev.get("seeds", 5),
         exploitability=ev.get("exploitability", 0),
         cost_limit=ev.get("cost_limit"),
+        optimal_grid=ev.get("optimal_grid", {}),
     )
 
 

@@ -31,6 +31,7 @@ from advgame.evaluation import (
 )
 from advgame.evaluation.attacks.optimal import (
     OPTIMAL,
+    OPTIMAL_GRID,
     OptimalSearch,
     optimal_jobs,
     released_jobs,
@@ -291,6 +292,7 @@ def evaluate_runs(
     resume: bool = False,
     released: Mapping[str, tuple[str, Any]] | None = None,
     released_adversaries: Mapping[str, Any] | None = None,
+    optimal_grid: Sequence[Mapping[str, Any]] | None = None,
 ) -> Path:
     """What ``advgame evaluate`` runs, through `evaluate_policies`; return ``report.md``.
 
@@ -299,7 +301,8 @@ def evaluate_runs(
     ``hopper/ppo``) and fixed policies given as ``NAME=...`` strings (`cli_protagonists`); the
     scenario is `scenario`, the runs' or the released agents'. `released_adversaries`
     (``{name: adversary spec}``) adds the ``attack optimal`` column played by each released
-    agent's own adversary (only released agents then).
+    agent's own adversary (only released agents then). `optimal_grid` replaces the searched
+    optimal attack's grid (`OptimalSearch.grid`; None: `OPTIMAL_GRID`).
     """
     released = dict(released or {})
     found = {Path(r).name: (run_protagonist(Path(r)), Path(r)) for r in runs}
@@ -329,9 +332,10 @@ def evaluate_runs(
     if clash:
         raise ConfigError(f"Protagonist names {clash} are taken by runs; name them apart.")
     protagonists.update(extra)
-    search = (
-        OptimalSearch(steps=exploitability_steps, workers=workers) if exploitability_steps else None
-    )
+    search = None
+    if exploitability_steps:
+        grid = tuple(optimal_grid) if optimal_grid else OPTIMAL_GRID
+        search = OptimalSearch(steps=exploitability_steps, grid=grid, workers=workers)
     return evaluate_policies(
         sid, protagonists, out, adversaries=adversaries, runs={n: d for n, (_, d) in found.items()},
         last=last, sample=sample, seed=seed, seeds=seeds, episodes=episodes, workers=workers,
