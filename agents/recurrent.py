@@ -53,10 +53,14 @@ class RecurrentPPOConfig(PPOConfig):
 
     @staticmethod
     def model_class() -> Any:
-        """The class that trains, saves and loads it: sb3-contrib's ``RecurrentPPO``."""
-        from sb3_contrib import RecurrentPPO
+        """The class that trains, saves and loads it: `advgame.agents.recurrent_ppo.UnrolledRecurrentPPO`.
 
-        return RecurrentPPO
+        That is sb3-contrib's ``RecurrentPPO`` with each minibatch unrolled in one LSTM call
+        (`advgame.agents.recurrent_ppo`); its files are sb3-contrib's.
+        """
+        from advgame.agents.recurrent_ppo import UnrolledRecurrentPPO
+
+        return UnrolledRecurrentPPO
 
     def _recurrent_kwargs(
         self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None

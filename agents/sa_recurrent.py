@@ -45,29 +45,14 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 from gymnasium import spaces
-from sb3_contrib import RecurrentPPO
 from stable_baselines3.common.utils import explained_variance
 
+from advgame.agents.recurrent_ppo import UnrolledRecurrentPPO, unrolled
 from advgame.agents.sa_ppo import SASettings, kl_rows, pgd_start, pgd_step
 
 __all__ = ["SARecurrentPPO", "recurrent_sa_regulariser"]
 
 States = tuple[torch.Tensor, torch.Tensor]
-
-
-def _unrolled(states: States, starts: torch.Tensor) -> tuple[States, torch.Tensor]:
-    """The same unroll with resets applied up front: ``(states, starts)`` for one LSTM call.
-
-    sb3-contrib cuts sequences at episode starts, so a reset can only be at a sequence's
-    first step: zeroing those sequences' initial states gives the same unroll with no resets,
-    which ``_process_sequence`` runs as one LSTM call instead of a Python loop over steps.
-    A reset further in (not made by sb3-contrib's buffer) keeps the step-by-step path.
-    """
-    grid = starts.reshape(states[0].shape[1], -1)
-    if torch.any(grid[:, 1:] != 0):
-        return states, starts
-    keep = (1.0 - grid[:, 0]).view(1, -1, 1)
-    return (states[0] * keep, states[1] * keep), torch.zeros_like(starts)
 
 
 def _masked_kl(
@@ -106,7 +91,7 @@ def recurrent_sa_regulariser(
         high: its upper end (``clip_obs``).
 
     """
-    states, starts = _unrolled(states, starts)
+    states, starts = unrolled(states, starts)
     w = mask.reshape(-1).to(obs.dtype)
     with torch.no_grad():
         clean = policy.get_distribution(obs, states, starts)[0].distribution
@@ -125,7 +110,7 @@ def recurrent_sa_regulariser(
     return total / w.sum().clamp(min=1.0), attacked
 
 
-class SARecurrentPPO(SASettings, RecurrentPPO):
+class SARecurrentPPO(SASettings, UnrolledRecurrentPPO):
     """sb3-contrib ``RecurrentPPO`` plus the sequence SA regulariser (see the module doc).
 
     Args:
@@ -193,7 +178,7 @@ class SARecurrentPPO(SASettings, RecurrentPPO):
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
         progress = self._current_progress_remaining
-        clip = self.clip_range(progress)  # type: ignore[operator]
+        clip = self.clip_range(progress)
         vf_range: Any = self.clip_range_vf  # a schedule or None
         clip_vf = None if vf_range is None else vf_range(progress)
         radius, bound = self.sa_radius(), self._clip_range()

@@ -9,6 +9,9 @@ per rollout of ``--n-steps`` steps on each of ``--n-envs`` envs), in interleaved
   64-unit LSTM per network read out linearly, ATLA's LSTM policy), minibatch 64;
 * ``lstm bN``: the same with a minibatch of ``--big-batch`` steps (whole stretches of
   sequences per gradient step, nearer ATLA's full-batch LSTM update; fewer, longer passes);
+* ``lstm bN loop``: the same config trained by sb3-contrib's own ``RecurrentPPO``, whose
+  update loops in Python over the steps of every minibatch that holds an episode start (advgame
+  trains `advgame.agents.recurrent_ppo.UnrolledRecurrentPPO`: one LSTM call per minibatch);
 * ``lstm-sa bN``: that with the SA regulariser (`advgame.agents.SARecurrentPPOConfig`: κ 0.3,
   2 PGD steps, ε 0.075 from the first step): ATLA-LSTM-SA's protagonist.
 
@@ -42,6 +45,15 @@ def _model(config: Any, n_envs: int) -> Any:
     return config.make_model(venv, seed=0, total_steps=10**7)
 
 
+def _stock(config: RecurrentPPOConfig, n_envs: int) -> Any:
+    """`config`'s model as sb3-contrib's own ``RecurrentPPO`` builds and trains it."""
+    from sb3_contrib import RecurrentPPO
+
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(ENV)] * n_envs))
+    kwargs = config._recurrent_kwargs(venv, seed=0, total_steps=10**7, tensorboard_log=None)
+    return RecurrentPPO("MlpLstmPolicy", venv, **kwargs)
+
+
 def _timed(model: Any, steps: int) -> float:
     """Steps per second of `model.learn(steps)` (rollouts and updates)."""
     start = time.perf_counter()
@@ -67,6 +79,9 @@ def main() -> None:
         f"lstm b{args.big_batch}": _model(
             RecurrentPPOConfig(**update, batch_size=args.big_batch), args.n_envs
         ),
+        f"lstm b{args.big_batch} loop": _stock(
+            RecurrentPPOConfig(**update, batch_size=args.big_batch), args.n_envs
+        ),
         f"lstm-sa b{args.big_batch}": _model(
             SARecurrentPPOConfig(**update, batch_size=args.big_batch, sa_ramp=0.0), args.n_envs
         ),
@@ -81,10 +96,10 @@ def main() -> None:
     print(f"{ENV}, {args.n_envs} envs x {args.n_steps} steps per rollout, 10 epochs, "
           f"{args.rounds} rounds of {args.steps} steps, 1 thread")  # fmt: skip
     print(f"calibration before: {line(before, 5_000, 3)}")
-    print(f"{'learner':<14} {'steps/s':>8} {'/ ppo (median, min-max)':>26}")
+    print(f"{'learner':<19} {'steps/s':>8} {'/ ppo (median, min-max)':>26}")
     for name, values in rates.items():
         span = median_span(values, rates["ppo"])
-        print(f"{name:<14} {statistics.median(values):>8.0f} {span:>26}")
+        print(f"{name:<19} {statistics.median(values):>8.0f} {span:>26}")
     print(f"calibration after: {line(after, 5_000, 3)}")
 
 

@@ -19,6 +19,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 import advgame
 from advgame.agents.checkpoint import SB3Checkpoint
 from advgame.agents.recurrent_policy import RecurrentSB3Policy
+from advgame.agents.recurrent_ppo import UnrolledRecurrentPPO
 from advgame.agents.sa_recurrent import SARecurrentPPO, recurrent_sa_regulariser
 from advgame.cli import main
 from advgame.errors import ConfigError
@@ -140,7 +141,7 @@ def _one_update(cls: type, **kw: Any) -> list[np.ndarray]:
 def test_with_kappa_zero_the_update_is_recurrent_ppos_and_kappa_changes_it(
     extra: dict[str, float],
 ) -> None:
-    plain = _one_update(RecurrentPPO, **extra)
+    plain = _one_update(UnrolledRecurrentPPO, **extra)  # the plain LSTM learner advgame trains
     zero = _one_update(SARecurrentPPO, sa_kappa=0.0, sa_eps=0.1, **extra)
     regularised = _one_update(SARecurrentPPO, sa_kappa=1.0, sa_eps=0.1, sa_ramp=0.0, **extra)
     for a, b in zip(plain, zero, strict=True):
