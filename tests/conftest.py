@@ -85,6 +85,87 @@ def tiny_atla() -> Callable[..., list[str]]:
     return args
 
 
+# -- the module games of the disruptor property tests (tests/test_disruptors_*.py) ---------------
+@pytest.fixture(scope="module")
+def hopper():
+    """Hopper-v5 with every disruptor kind under test (budgets in tests/_disruptor_helpers.py)."""
+    import advgame
+    from advgame.disruptors import (
+        ActionDisruptor,
+        DynamicsDisruptor,
+        ForceDisruptor,
+        ObservationDisruptor,
+        RewardDisruptor,
+    )
+    from tests._disruptor_helpers import (
+        ACT_EPS,
+        DYN_PARAMS,
+        FORCE_BOUNDS,
+        OBS_EPS,
+        TORQUE_BOUND,
+    )
+
+    game = advgame.make(
+        "Hopper-v5",
+        disruptors=[
+            ObservationDisruptor(eps=tuple(OBS_EPS), name="obs_linf"),
+            ObservationDisruptor(eps=0.2, norm="l2", name="obs_l2"),
+            ObservationDisruptor(eps=0.1, space="normalized", name="obs_norm"),
+            ObservationDisruptor(eps=0.3, dims=(0, 5, 7), name="obs_dims"),
+            ObservationDisruptor(bounded=False, name="obs_unbounded"),
+            RewardDisruptor(eps=0.5),
+            RewardDisruptor(eps=0.25, signal="cost"),
+            RewardDisruptor(bounded=False, name="reward_unbounded"),
+            ActionDisruptor(eps=ACT_EPS, name="act_add"),
+            ActionDisruptor(mode="probabilistic", alpha=0.5, name="act_prob"),
+            ActionDisruptor(mode="noisy", alpha=0.3, name="act_noisy"),
+            ActionDisruptor(bounded=False, name="act_unbounded"),
+            ForceDisruptor(
+                bodies=("torso", "foot"),
+                axes="xz",
+                max_force=FORCE_BOUNDS,
+                torque_axes="y",
+                max_torque=TORQUE_BOUND,
+            ),
+            DynamicsDisruptor(params=DYN_PARAMS),
+        ],
+    )
+    game.reset(seed=0)
+    yield game
+    game.close()
+
+
+@pytest.fixture(scope="module")
+def hopper_obs(hopper):
+    """The protagonist's first observation of `hopper` (seed 0), as float64."""
+    import numpy as np
+
+    from tests._disruptor_helpers import P
+
+    obs, _ = hopper.reset(seed=0)
+    return np.array(obs[P], dtype=np.float64)
+
+
+@pytest.fixture(scope="module")
+def lunar():
+    """LunarLander-v3 with an observation and a discrete (probabilistic) action disruptor."""
+    import advgame
+    from advgame.disruptors import ActionDisruptor, ObservationDisruptor
+    from tests._disruptor_helpers import BOX2D_REASON
+
+    pytest.importorskip("Box2D", reason=BOX2D_REASON)
+    game = advgame.make(
+        "LunarLander-v3",
+        disruptors=[
+            ObservationDisruptor(eps=3.0),
+            ActionDisruptor(mode="probabilistic", alpha=1.0, name="act_discrete"),
+        ],
+    )
+    game.reset(seed=0)
+    yield game
+    game.close()
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
     """With ``ADVGAME_SKIP_MISSING_EXTRAS=1`` (the unlocked newest-Python run of CI, which
@@ -110,7 +191,8 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
 CORE_FILES = frozenset(
     f"test_{name}.py"
     for name in (
-        "game", "views", "vector", "lockstep", "disruptors", "dynamics",
+        "game", "views", "vector", "lockstep", "disruptors_observation_reward",
+        "disruptors_action_force_dynamics", "disruptors_decode", "dynamics",
         "evaluation", "batched_eval", "evaluate_any", "threat_model", "policy_wrappers",
         "whitebox", "sb3", "training", "cli", "not_applicable", "robust_sarsa", "attack_batch",
         "fuzz_config", "fuzz_train_eval", "corrupt_files", "sa_ppo", "pgd_at",
