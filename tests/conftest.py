@@ -191,8 +191,9 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
 CORE_FILES = frozenset(
     f"test_{name}.py"
     for name in (
-        "game", "views", "vector", "lockstep", "disruptors_observation_reward",
-        "disruptors_action_force_dynamics", "disruptors_decode", "dynamics",
+        "game_moves", "game_payoffs_and_determinism", "game_errors", "views", "vector", "lockstep",
+        "disruptors_observation_reward", "disruptors_action_force_dynamics", "disruptors_decode",
+        "dynamics",
         "evaluation", "batched_eval", "evaluate_any", "threat_model", "policy_wrappers",
         "whitebox", "sb3", "training", "cli", "not_applicable", "robust_sarsa", "attack_batch",
         "fuzz_config", "fuzz_train_eval", "corrupt_files", "sa_ppo", "pgd_at",
