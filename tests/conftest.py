@@ -195,7 +195,8 @@ CORE_FILES = frozenset(
         "disruptors_observation_reward", "disruptors_action_force_dynamics", "disruptors_decode",
         "dynamics",
         "evaluation", "batched_eval", "evaluate_any", "threat_model", "policy_wrappers",
-        "whitebox", "sb3", "training", "cli", "not_applicable", "robust_sarsa", "attack_batch",
+        "whitebox", "sb3", "training_run", "training_learners", "training_population_config", "cli",
+        "not_applicable", "robust_sarsa", "attack_batch",
         "fuzz_config", "fuzz_train_eval", "corrupt_files", "sa_ppo", "pgd_at",
         "train_config_game", "mujoco_batch",
     )
