@@ -193,7 +193,7 @@ CORE_FILES = frozenset(
     for name in (
         "game_moves", "game_payoffs_and_determinism", "game_errors", "views", "vector", "lockstep",
         "disruptors_observation_reward", "disruptors_action_force_dynamics", "disruptors_decode",
-        "dynamics",
+        "dynamics_params", "dynamics_schedules_force",
         "evaluation", "batched_eval", "evaluate_any", "threat_model", "policy_wrappers",
         "whitebox", "sb3", "training_run", "training_learners", "training_population_config", "cli",
         "not_applicable", "robust_sarsa", "attack_batch",

@@ -314,7 +314,7 @@ def test_dynamics_values_stay_in_their_intervals(hopper, action):
 @given(action=adv_actions(1))
 def test_dynamics_zero_width_interval_at_nominal_is_identity(hopper, param, action):
     # Wind (whose air density is part of the Param) and length (a recompiled model) are covered
-    # by the trajectory tests in test_dynamics.py.
+    # by the trajectory tests in test_dynamics_params.py.
     sim = hopper.task.sim
     nominal = model_snapshot(sim)
     d = DynamicsDisruptor(params=[param]).build(hopper.task)
