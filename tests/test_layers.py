@@ -276,4 +276,6 @@ def test_a_released_agent_loads_and_plays(tmp_path: Path, monkeypatch: pytest.Mo
     game = make("Hopper-v5")
     (result,) = rollout(game, dict.fromkeys(game.protagonists, spec), seed=0)
     game.close()
-    assert result.true_return > 2_000 and result.length == 1000  # the released gait, to the end
+    # the released gait (an unloaded or untrained policy falls within ~100 steps, under 1,000);
+    # the released PPO since 27 Nov (ppo-s2, 2,813 nominal) hops 772 steps of seed 0
+    assert result.true_return > 2_000 and result.length > 500
