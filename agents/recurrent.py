@@ -53,7 +53,7 @@ class RecurrentPPOConfig(PPOConfig):
 
     @staticmethod
     def model_class() -> Any:
-        """The class that trains, saves and loads it: `advgame.agents.recurrent_ppo.UnrolledRecurrentPPO`.
+        """The class that trains, saves and loads it: `UnrolledRecurrentPPO`.
 
         That is sb3-contrib's ``RecurrentPPO`` with each minibatch unrolled in one LSTM call
         (`advgame.agents.recurrent_ppo`); its files are sb3-contrib's.

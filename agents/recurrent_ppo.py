@@ -10,9 +10,9 @@ always holds an episode start, so an update paid that loop on every minibatch.
 A reset can only fall on a sequence's first step (the cut guarantees it), so zeroing those
 sequences' initial states up front and clearing the marks gives the same unroll with no reset
 inside: `unrolled` does it, `UnrolledRolloutBuffer` hands out minibatches so prepared, and
-`UnrolledRecurrentPPO` trains on them. The values, log-probabilities and gradients are the
-same numbers (tested bit for bit against sb3-contrib's loop), and training the same up to
-float rounding (the per-step gradient terms are summed in another order). At the zoo's setting
+`UnrolledRecurrentPPO` trains on them. The values and log-probabilities are the same numbers
+(tested bit for bit against sb3-contrib's loop); training is the same up to float rounding
+(the per-step gradient terms are summed in another order). At the zoo's setting
 (8 envs x 2,048 steps, 1,024-step minibatches, 10 epochs) training ran 1,643 steps/s against
 sb3-contrib's 841 (``benchmarks/bench_recurrent.py``, 27 Nov, quiet cores). Checkpoints are
 sb3-contrib's: saved and loaded by either class.

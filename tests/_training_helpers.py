@@ -61,7 +61,7 @@ def final_protagonist(run: Path) -> SB3Checkpoint:
     )
 
 
-def _final_learning_rate(run: Path, algo: str) -> float:
+def final_learning_rate(run: Path, algo: str) -> float:
     folder = run / state(run)["checkpoint"]
     model = _algo_class(algo).load(str(folder / "protagonist.zip"), device="cpu")
     return float(model.lr_schedule(0.0))  # at the end of the last learn() call

@@ -34,8 +34,8 @@ from tests._training_helpers import (
     HOPPER,
     OFF_POLICY,
     PENDULUM,
-    _final_learning_rate,
     config,
+    final_learning_rate,
     final_protagonist,
     parameters,
     progress_rows,
@@ -86,7 +86,7 @@ def test_ppo_method_with_a_td3_protagonist_and_warmup(td3_warmup_run: Path) -> N
 
 def test_the_learning_rate_decays_to_zero_over_a_run_with_warmup(td3_warmup_run: Path) -> None:
     # 64 warm-up + 2 x 128 steps were trained; the decay must span exactly those 320 steps
-    assert _final_learning_rate(td3_warmup_run, "td3") == pytest.approx(0.0, abs=1e-12)
+    assert final_learning_rate(td3_warmup_run, "td3") == pytest.approx(0.0, abs=1e-12)
 
 
 def _spy_on_make(monkeypatch: pytest.MonkeyPatch) -> list[tuple[dict[str, Any], Any]]:

@@ -26,8 +26,8 @@ from advgame.training.population import Population
 from tests._training_helpers import (
     AGENT,
     HOPPER,
-    _final_learning_rate,
     config,
+    final_learning_rate,
     final_protagonist,
     parameters,
     progress_rows,
@@ -207,4 +207,4 @@ def test_another_seed_trains_another_protagonist(atla_run: Path, tmp_path: Path)
 
 
 def test_the_learning_rate_decays_to_zero_over_the_run(atla_run: Path) -> None:
-    assert _final_learning_rate(atla_run, "ppo") == pytest.approx(0.0, abs=1e-12)
+    assert final_learning_rate(atla_run, "ppo") == pytest.approx(0.0, abs=1e-12)
