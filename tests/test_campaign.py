@@ -51,7 +51,11 @@ def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(
     first = ["campaign", str(spec), "--workers", "1", "--no-progress"]
     assert main([*first, "--stage", "train", "--runs", "ppo-s7"]) == 2
     assert "No run 'ppo-s7' in the campaign; its runs: ppo-s0" in capsys.readouterr().err
-    assert main([*first, "--stage", "train", "--runs", "ppo-s1"]) == 0  # a chosen piece
+    # a chosen piece, with progress: stderr is a file here, so a line per iteration and run
+    assert main(["campaign", str(spec), "--workers", "1", "--stage", "train", "--runs", "ppo-s1"]) == 0
+    err = capsys.readouterr().err
+    assert "train Hopper-v5 ppo-s1: 128/128 steps (100 %)" in err and "iteration 1/1 in" in err
+    assert "campaign tiny: 1/1 runs (100 %)" in err and "finished: ppo-s1" in err
     status = json.loads((out / "status.json").read_text())
     assert [r for r, s in status["runs"].items() if s["state"] == "done"] == ["ppo-s1"]
     assert main([*first, "--stage", "train", "--max-runs", "1"]) == 0  # the next unfinished one

@@ -14,13 +14,20 @@ from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch
 
 
 def test_a_checkpoint_gets_its_strongest_searched_adversary(
-    pendulum_ppo: Path, tmp_path: Path
+    pendulum_ppo: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "res"
     args = ["evaluate", "--scenario", "InvertedPendulum-v5", "--out", str(out), "--seeds", "2"]
     args += ["--workers", "1", "--budgets", "--adversaries", "nominal", "--exploitability", "256"]
     assert main([*args, "--checkpoint", f"ppo={pendulum_ppo}:ppo", "--raw-obs", "ppo"]) == 0
     search = json.loads((out / "optimal.json").read_text())["ppo"]
+    # progress (stderr is a file here): a line as the search starts and one per candidate
+    err = capsys.readouterr().err
+    n = len(search["candidates"])
+    assert "optimal attack InvertedPendulum-v5: 0/" in err
+    assert f"; {n} candidates to train, 0 read back" in err
+    assert err.count("optimal attack InvertedPendulum-v5:") == n + 1
+    assert f"; {n} this run)" in err
     # a feed-forward protagonist: every entry but the LSTM adversary (recurrent victims only)
     offered = [dict(g) for g in OPTIMAL_GRID if g.get("victims", "all") == "all"]
     assert len(offered) == len(OPTIMAL_GRID) - 1
@@ -55,6 +62,7 @@ def test_a_checkpoint_gets_its_strongest_searched_adversary(
     stamps = [p.stat().st_mtime_ns for p in parts]
     assert main([*args, "--checkpoint", f"ppo={pendulum_ppo}:ppo", "--raw-obs", "ppo"]) == 0
     assert [p.stat().st_mtime_ns for p in sorted((out / "optimal" / "parts").iterdir())] == stamps
+    assert f"(100 %), 0 s; 0 candidates to train, {n} read back" in capsys.readouterr().err
 
 
 def test_the_long_candidate_trains_first_with_its_scaled_budget(

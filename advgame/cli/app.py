@@ -191,7 +191,7 @@ def _train_parser(sub: Any) -> None:
             if not scalar_field(TrainConfig, name)
         ),
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar or log lines")
     add_arguments(p, TrainConfig)
     p.set_defaults(func=_cmd_train)
 
@@ -236,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     _train_parser(sub)
     p = sub.add_parser("resume", help="continue an interrupted run")
     p.add_argument("run_dir", help="the run directory")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar or log lines")
     p.set_defaults(func=_cmd_resume)
 
     evaluate_parser(sub)

@@ -32,7 +32,7 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
     p.add_argument("--release", metavar="ZOO", nargs="?", const="", default=None,
                    help="after the table, copy each method's median agent into the zoo "
                    "(default: the repository's zoo/) with its manifest entry")  # fmt: skip
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars or log lines")
     executor_arguments(p, workers=2)
     p.set_defaults(func=_cmd_campaign)
 

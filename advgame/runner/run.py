@@ -126,7 +126,12 @@ def run_units(
         ship_files: send the files the specs name as bytes (default: True on Ray, False
             locally).
         start_method: local pool: ``"forkserver"`` or ``"spawn"``.
-        progress: an object with ``update()`` (a tqdm bar), called once per finished unit.
+        progress: an object with ``update()`` (a tqdm bar), called once per finished unit
+            (units read back from part files first); or one with ``unit_done(index,
+            before)``, called instead with the unit's index in `units` and whether it was
+            read back (for progress weighted by unit, such as the optimal attack's
+            candidates of different lengths), and ``units_started(count)`` if it has one,
+            once the read-back units are counted and `count` units start.
 
     """
     _check(executor, workers, max_retries, start_method)
@@ -139,21 +144,51 @@ def run_units(
     todo = [i for i, r in enumerate(records) if r is None]
     if len(todo) < len(units):
         log.info("%d of %d jobs already done in %s", len(units) - len(todo), len(units), parts)
-    for _ in range(len(units) - len(todo)):
-        progress is not None and progress.update()
+    ticks = _Ticks(progress, keys)
+    for i, r in enumerate(records):
+        if r is not None:
+            ticks.done(keys[i], before=True)
+    ticks.started(len(todo))
     ship_files = executor == "ray" if ship_files is None else ship_files
     from advgame.runner import local as _local
     from advgame.runner import ray as _ray
 
     run = {"local": _local.run_local, "ray": _ray.run_ray}[executor]
     fresh = run(fn, [units[i] for i in todo], [keys[i] for i in todo], Options(
-        workers, address, max_retries, parts, ship_files, start_method, progress))  # fmt: skip
+        workers, address, max_retries, parts, ship_files, start_method, ticks))  # fmt: skip
     for i, rec in zip(todo, fresh, strict=True):
         records[i] = rec
     failed = [(units[i], r.error) for i, r in enumerate(records) if r is not None and r.error]
     if failed:
         raise JobFailedError([(u, str(e)) for u, e in failed], len(units) - len(failed))
     return [r for r in records if r is not None]
+
+
+class _Ticks:
+    """Tells `run_units`' progress object about each finished unit (see its `progress`)."""
+
+    def __init__(self, progress: Any, keys: Sequence[str]) -> None:
+        self.progress = progress
+        self.index = {k: i for i, k in enumerate(keys)}
+
+    def done(self, key: str, before: bool = False) -> None:
+        """Unit `key` finished (`before`: read back from its part file)."""
+        if self.progress is None:
+            return
+        hook = getattr(self.progress, "unit_done", None)
+        skip = getattr(self.progress, "skip", None)
+        if hook is not None:
+            hook(self.index[key], before)
+        elif before and skip is not None:  # `LineProgress`: not part of this run's rate
+            skip(1)
+        else:
+            self.progress.update()
+
+    def started(self, count: int) -> None:
+        """`count` units start (after the read-back ones were counted)."""
+        hook = getattr(self.progress, "units_started", None)
+        if hook is not None:
+            hook(count)
 
 
 def _check(executor: str, workers: int, max_retries: int, start_method: str) -> None:

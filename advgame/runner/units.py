@@ -259,6 +259,7 @@ class Options:
     ship_files: bool
     start_method: str
     progress: Any
+    """What a finished unit is reported to (``done(key)``; `advgame.runner.run`)."""
 
 
 def finish(rec: UnitRecord, out: dict[str, Any], opts: Options) -> UnitRecord:
@@ -269,7 +270,7 @@ def finish(rec: UnitRecord, out: dict[str, Any], opts: Options) -> UnitRecord:
     rec.extra["received"] = time.time()
     _write_part(opts.parts, rec)
     if opts.progress is not None:
-        opts.progress.update()
+        opts.progress.done(rec.key)
     return rec
 
 

@@ -19,6 +19,7 @@ from advgame.core.config import write_atomic
 from advgame.core.episodes import filler_action, rollout
 from advgame.core.files import read_csv, read_json, reading, require
 from advgame.core.policy import ConstantPolicy
+from advgame.core.progress import progress
 from advgame.core.registry import load, make
 from advgame.core.views import view_factory
 from advgame.errors import FileFormatError
@@ -57,11 +58,20 @@ class Run:
         per_iter = cfg.protagonist_steps + cfg.adversary_steps * len(self.t.learned)
         total = per_iter * cfg.iterations + cfg.warmup_steps
         done = per_iter * (start - 1) + (cfg.warmup_steps if start > 1 else 0)
-        bar = _progress_bar(total, done, self.cfg.scenario, self.t.progress)
+        show = self.t.progress
+        bar = progress(
+            total,
+            f"train {cfg.scenario} {self.dir.name}",
+            unit="step",
+            initial=done,
+            show=bool(show),
+            lines=True if show == "lines" else None,
+        )
         writer = _tensorboard(self.dir / "tb" / "loop")
         try:
             for it in range(start, cfg.iterations + 1):
                 row = self._iteration(it, bar)
+                bar.set_postfix_str(_summary(row, cfg.iterations))
                 for key, value in row.items():
                     if (
                         key != "iteration"
@@ -281,27 +291,19 @@ def _load_team(folder: Path, learner: Any, fns: list[Any], tb: str) -> Any:
     return learner.load_learner(folder, fns, tensorboard_log=tb)
 
 
-class _NoBar:
-    def update(self, n: int) -> None:
-        """Nothing to show."""
-
-    def close(self) -> None:
-        """Nothing to close."""
-
-
-def _progress_bar(total: int, done: int, label: str, show: bool) -> Any:
-    if not show:
-        return _NoBar()
-    from tqdm.auto import tqdm
-
-    return tqdm(
-        total=total,
-        initial=done,
-        desc=f"train {label}",
-        unit="step",
-        smoothing=0.1,
-        mininterval=1.0,
-    )
+def _summary(row: dict[str, Any], iterations: int) -> str:
+    """An iteration's milestone for the progress display: its number and true returns."""
+    text = f"iteration {row['iteration']}/{iterations} in {row['wall_s']:.0f} s"
+    for key, name in (
+        ("protagonist_phase_true_return", "protagonist return"),
+        ("adversary_phase_true_return", "under the adversary"),
+        ("eval_nominal_return", "evaluated nominal"),
+        ("eval_attacked_return", "attacked"),
+    ):
+        value = row.get(key)
+        if isinstance(value, float) and np.isfinite(value):
+            text += f", {name} {value:,.0f}"
+    return text
 
 
 def _tensorboard(folder: Path) -> Any:

@@ -13,8 +13,12 @@ from advgame.training.trainer import Trainer
 __all__ = ["resume", "train"]
 
 
-def train(config: TrainConfig, run_dir: str | Path, progress: bool = True) -> Path:
-    """Start a new run in `run_dir` (which must not hold one) and train it to the end."""
+def train(config: TrainConfig, run_dir: str | Path, progress: bool | str = True) -> Path:
+    """Start a new run in `run_dir` (which must not hold one) and train it to the end.
+
+    `progress`: True shows a bar on a terminal and a line per iteration (and every five
+    minutes) when stderr is a file; ``"lines"`` always the lines; False nothing.
+    """
     run_dir = Path(run_dir)
     if (run_dir / "state.json").exists():
         raise ConfigError(f"{run_dir} already holds a run; use resume (advgame resume {run_dir}).")
@@ -24,8 +28,8 @@ def train(config: TrainConfig, run_dir: str | Path, progress: bool = True) -> Pa
     return run.execute(fresh=True)
 
 
-def resume(run_dir: str | Path, progress: bool = True) -> Path:
-    """Continue the run in `run_dir` from its last finished iteration."""
+def resume(run_dir: str | Path, progress: bool | str = True) -> Path:
+    """Continue the run in `run_dir` from its last finished iteration (`progress` as `train`)."""
     run_dir = Path(run_dir)
     if not (run_dir / "config.json").exists():
         raise ConfigError(f"No run in {run_dir} (no config.json).")

@@ -48,7 +48,11 @@ def scaled(spec: Any, factor: float) -> Any:
 class Trainer:
     """Runs (or resumes) the alternation loop of `config` in `run_dir`."""
 
-    def __init__(self, config: TrainConfig, run_dir: str | Path, progress: bool = True) -> None:
+    def __init__(
+        self, config: TrainConfig, run_dir: str | Path, progress: bool | str = True
+    ) -> None:
+        if progress not in (True, False, "lines"):
+            raise ConfigError(f"progress must be True, False or 'lines', got {progress!r}.")
         self.cfg = config
         self.dir = Path(run_dir)
         self.progress = progress

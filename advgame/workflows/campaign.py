@@ -72,24 +72,31 @@ def _progress(run_dir: Path) -> int:
 class _StatusEach:
     """Rewrites ``status.json`` each time a run finishes (the executor's progress hook)."""
 
-    def __init__(self, campaign: Campaign, out: Path, training: Sequence[str]) -> None:
+    def __init__(self, campaign: Campaign, out: Path, training: Sequence[str], show: bool) -> None:
+        from advgame.core.progress import progress
+
         self.campaign, self.out, self.training = campaign, out, training
+        self.bar = progress(len(training), f"campaign {out.name}", unit="run", show=show,
+                            lines=True)  # fmt: skip
 
     def update(self) -> None:
         """One more unit finished: record what is on disk now."""
-        write_status(self.campaign, self.out, training=self.training)
+        status = write_status(self.campaign, self.out, training=self.training)
+        done = [r for r in self.training if status["runs"][r]["state"] == "done"]
+        self.bar.update()
+        self.bar.set_postfix_str(f"finished: {', '.join(done)}")
 
 
-def _train_unit(unit: tuple[Any, str, str]) -> str:
+def _train_unit(unit: tuple[Any, str, str, bool | str]) -> str:
     """Train or resume one run to its end, then keep it compact in ``finished/`` (a worker)."""
     from advgame.training import resume, train
 
-    config, partial, finished = unit
+    config, partial, finished, show = unit
     path = Path(partial)
     if (path / "config.json").exists():
-        resume(path, progress=False)
+        resume(path, progress=show)
     else:
-        train(config, path, progress=False)
+        train(config, path, progress=show)
     compact(path)
     Path(finished).parent.mkdir(parents=True, exist_ok=True)
     path.rename(finished)  # one rename: ``finished/`` never holds half a run
@@ -159,7 +166,9 @@ def run_campaign(
         address: a Ray cluster address.
         stage: ``"train"``, ``"evaluate"`` (finished runs only) or ``"all"``.
         max_runs: train at most this many unfinished runs now (the rest another time).
-        progress: progress bars for the evaluation.
+        progress: show progress: a line per training iteration and finished run (the runs
+            train in worker processes, side by side), the optimal attack's candidates and a
+            bar (lines when stderr is a file) for the evaluation.
         only: train only these runs (``METHOD-sSEED``), in this order: how a session picks the
             pieces that fit its time.
 
@@ -182,12 +191,14 @@ def run_campaign(
         write_status(campaign, out, training=todo)
         if todo:
             log.info("campaign: training %d run(s): %s", len(todo), todo)
+            show = "lines" if progress else False
             units = [
-                (campaign.config(r), str(out / "runs" / r), str(out / FINISHED / r)) for r in todo
+                (campaign.config(r), str(out / "runs" / r), str(out / FINISHED / r), show)
+                for r in todo
             ]
             run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
                       address=address, max_retries=1,
-                      progress=_StatusEach(campaign, out, todo))  # fmt: skip
+                      progress=_StatusEach(campaign, out, todo, progress))  # fmt: skip
     status = write_status(campaign, out)
     if stage == "train":
         return out / "status.json"

@@ -155,7 +155,7 @@ def evaluate_policies(
     agent = observation_agent(scenario, threat) if learned_column else ""
     if optimal is not None:
         jobs += optimal_jobs(scenario, threat, agent, protagonists, optimal, out, seeds=seed_list,
-                             episodes=episodes)  # fmt: skip
+                             episodes=episodes, progress=progress)  # fmt: skip
     if released is not None:
         jobs += released_jobs(scenario, threat, agent, protagonists, released, seeds=seed_list,
                               episodes=episodes)  # fmt: skip

@@ -152,13 +152,16 @@ def optimal_jobs(
     *,
     seeds: Sequence[int],
     episodes: int = 1,
+    progress: bool = False,
 ) -> list[EvalJob]:
     """The ``attack optimal`` column's jobs: per protagonist, its strongest searched adversary.
 
     Candidates are written under ``out/optimal/NAME/K/`` and the search to
     ``out/optimal.json`` (every candidate's settings and selection return, the one kept).
+    `progress`: show the search's progress in adversary steps (`advgame.core.progress`: a
+    line per trained candidate when stderr is a file).
     """
-    found = _search(scenario, threat, agent, protagonists, search, out)
+    found = _search(scenario, threat, agent, protagonists, search, out, progress)
     record = {
         n: {"kept": f.spec.path, "kept_normalizer": f.spec.normalizer, "candidates": f.candidates}
         for n, f in found.items()
@@ -213,6 +216,7 @@ def _search(
     protagonists: Mapping[str, Any],
     search: OptimalSearch,
     out: Path,
+    progress: bool = False,
 ) -> dict[str, _Found]:
     """Train every candidate as executor jobs, write their files, keep each row's strongest."""
     from advgame.agents.checkpoint import SB3Checkpoint
@@ -245,8 +249,12 @@ def _search(
     units, where = [units[i] for i in order], [where[i] for i in order]
     kind = search.executor or _DEFAULT_EXECUTOR[0]
     log.info("optimal attack: %d candidates of %d steps", len(units), search.steps)
-    records = run_units(train_best_response, units, executor=kind, workers=search.workers,
-                        parts_dir=out / "optimal" / "parts")  # fmt: skip
+    shown = _CandidateProgress(units, scenario, progress)
+    try:
+        records = run_units(train_best_response, units, executor=kind, workers=search.workers,
+                            parts_dir=out / "optimal" / "parts", progress=shown)  # fmt: skip
+    finally:
+        shown.bar.close()
     by_index: dict[str, dict[int, Any]] = {}
     for (name, k), rec in zip(where, records, strict=True):
         folder = out / "optimal" / name / str(k)
@@ -278,6 +286,35 @@ def _search(
             for k, m in means.items()
         ]
     return found
+
+
+class _CandidateProgress:
+    """The search's progress counted in adversary steps (its candidates differ in length)."""
+
+    def __init__(self, units: Sequence[Any], scenario: str, show: bool) -> None:
+        from advgame.core.progress import progress
+
+        self.units = units
+        self.trained = 0
+        total = sum(u.steps for u in units)
+        self.bar = progress(total, f"optimal attack {scenario}", unit="step", show=show)
+
+    def units_started(self, count: int) -> None:
+        """`count` candidates start training (the others were read back)."""
+        read = len(self.units) - count
+        self.bar.set_postfix_str(f"{count} candidates to train, {read} read back")
+
+    def unit_done(self, index: int, before: bool) -> None:
+        """Candidate `index` finished (`before`: read back from its part file)."""
+        unit = self.units[index]
+        if before:
+            getattr(self.bar, "skip", self.bar.update)(unit.steps)
+            return
+        self.trained += 1
+        self.bar.update(unit.steps)
+        self.bar.set_postfix_str(
+            f"candidate {unit.name} trained ({unit.steps:,} steps; {self.trained} this run)"
+        )
 
 
 def write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:

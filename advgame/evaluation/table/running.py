@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from advgame.core.policy import WhiteBox, WhiteBoxForwarder
+from advgame.core.progress import progress as progress_display
 from advgame.errors import ConfigError
 from advgame.evaluation.table.applicable import Rows, learn_ahead, not_applicable
 from advgame.evaluation.table.batched import LOCKSTEP_EPISODES
@@ -170,7 +171,8 @@ def evaluate(
         jobs: the cells to play.
         workers: local: 1 plays in this process, more in a process pool; Ray: units in flight
             at once (and the CPUs of the local Ray it starts if none is running).
-        progress: show a tqdm progress bar on stderr.
+        progress: show progress on stderr (`advgame.core.progress`: a bar on a terminal,
+            a line every five minutes in a file).
         start_method: local pool: ``"forkserver"`` or ``"spawn"`` (not fork: simulators and
             torch hold threads and GL contexts that do not survive it).
         executor: ``"local"`` or ``"ray"``; None: the default of `use_executor` (``"local"``).
@@ -182,8 +184,6 @@ def evaluate(
         ship_files: send checkpoint files to the workers as bytes (default: on Ray only).
 
     """
-    from tqdm.auto import tqdm
-
     jobs = list(jobs)
     if not all(isinstance(j, EvalJob) for j in jobs):
         raise ConfigError("evaluate() takes EvalJob objects; build them with population_jobs().")
@@ -207,10 +207,13 @@ def evaluate(
         "evaluating %d jobs (%d units) on %s, %d worker(s)", len(jobs), len(units), kind, workers
     )
     out = Path(results_dir) if results_dir is not None else None
-    with tqdm(total=len(units), desc="evaluate", file=sys.stderr, disable=not progress) as bar:
+    bar = progress_display(len(units), "evaluate", show=progress)
+    try:
         records = run_units(run_unit, units, executor=kind, workers=workers, address=address,
                             max_retries=max_retries, parts_dir=out and out / "parts",
                             ship_files=ship_files, start_method=start_method, progress=bar)  # fmt: skip
+    finally:
+        bar.close()
     if out is not None:
         write_timings(records, out / "jobs.jsonl")
     return PayoffTable((row for rec in records for row in rec.value), na)

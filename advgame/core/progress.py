@@ -1,0 +1,160 @@
+"""Progress of long runs: a tqdm bar on a terminal, plain timed lines in a log file.
+
+A campaign left running for hours under ``nohup`` or ``setsid ... > log 2>&1`` writes to a
+file, where a bar is either silent or a single line of carriage returns. `progress` gives a
+tqdm bar when the stream is a terminal and a `LineProgress` otherwise: one line with the
+time, the count, the share done, the elapsed time and an estimate of what is left, at most every
+`LineProgress.interval` seconds and whenever a caller marks a milestone (`set_postfix_str`,
+e.g. an iteration or a unit finished). Both have tqdm's ``update``, ``set_postfix_str`` and
+``close``, so callers drive either the same way.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import IO, Any
+
+__all__ = ["LineProgress", "Silent", "progress"]
+
+
+class Silent:
+    """Progress that shows nothing (``show=False``)."""
+
+    def update(self, n: int = 1) -> None:
+        """Nothing to show."""
+
+    def set_postfix_str(self, text: str = "") -> None:
+        """Nothing to show."""
+
+    def close(self) -> None:
+        """Nothing to close."""
+
+
+def _duration(seconds: float) -> str:
+    """``"42 s"``, ``"7.5 min"`` or ``"3.2 h"``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 90 * 60:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+class LineProgress:
+    """Progress as timed lines, for logs.
+
+    Args:
+        total: the count at the end.
+        desc: what is counted, at the start of each line (``"train Hopper-v5 ppo-s0"``).
+        unit: the counted thing, singular (``"step"``, ``"candidate"``).
+        initial: the count already done before this process (a resumed run); the estimate of
+            what is left uses only the rate of this process.
+        interval: seconds between two lines written by `update` alone.
+        stream: where lines go (default ``sys.stderr``).
+        clock: the time source (seconds; for tests).
+
+    """
+
+    def __init__(
+        self,
+        total: int,
+        desc: str,
+        *,
+        unit: str = "unit",
+        initial: int = 0,
+        interval: float = 300.0,
+        stream: IO[str] | None = None,
+        clock: Any = time.monotonic,
+    ) -> None:
+        self.total, self.desc, self.unit = int(total), desc, unit
+        self.n = self.initial = int(initial)
+        self.interval = float(interval)
+        self.stream = stream
+        self.clock = clock
+        self.start = self.last = clock()
+        self.postfix = ""
+        self.written = self.n
+
+    def update(self, n: int = 1) -> None:
+        """Count `n` more; write a line if `interval` seconds passed since the last one."""
+        self.n += n
+        if self.clock() - self.last >= self.interval:
+            self.write()
+
+    def skip(self, n: int) -> None:
+        """Count `n` as done before this process (like `initial`: not in the rate)."""
+        self.n += n
+        self.initial += n
+        self.written = self.n
+
+    def set_postfix_str(self, text: str = "") -> None:
+        """Mark a milestone: `text` ends this and later lines, and a line is written now."""
+        self.postfix = text
+        self.write()
+
+    def close(self) -> None:
+        """Write a last line if the count moved since the previous one."""
+        if self.n != self.written:
+            self.write()
+
+    def line(self) -> str:
+        """The line `write` would write now (without the time stamp)."""
+        now = self.clock()
+        elapsed = now - self.start
+        share = f" ({100 * self.n / self.total:.0f} %)" if self.total > 0 else ""
+        text = f"{self.desc}: {self.n:,}/{self.total:,} {self.unit}s{share}, {_duration(elapsed)}"
+        done_here = self.n - self.initial
+        if 0 < done_here and self.n < self.total:
+            left = (self.total - self.n) * elapsed / done_here
+            text += f", about {_duration(left)} left"
+        return f"{text}; {self.postfix}" if self.postfix else text
+
+    def write(self) -> None:
+        """Write the current line, time-stamped, and flush."""
+        stream = self.stream if self.stream is not None else sys.stderr
+        stamp = time.strftime("%H:%M:%S")
+        print(f"[{stamp}] {self.line()}", file=stream, flush=True)
+        self.last, self.written = self.clock(), self.n
+
+
+def progress(
+    total: int,
+    desc: str,
+    *,
+    unit: str = "unit",
+    initial: int = 0,
+    show: bool = True,
+    lines: bool | None = None,
+    stream: IO[str] | None = None,
+) -> Any:
+    """A progress display with ``update``, ``set_postfix_str`` and ``close``.
+
+    Args:
+        total: the count at the end.
+        desc: what is counted.
+        unit: the counted thing, singular.
+        initial: the count already done (a resumed run).
+        show: False: `Silent`.
+        lines: True: `LineProgress`; False: a tqdm bar; None: a bar when `stream` is a
+            terminal, lines otherwise.
+        stream: where it writes (default ``sys.stderr``).
+
+    """
+    if not show:
+        return Silent()
+    out = stream if stream is not None else sys.stderr
+    if lines is None:
+        lines = not (hasattr(out, "isatty") and out.isatty())
+    if lines:
+        return LineProgress(total, desc, unit=unit, initial=initial, stream=stream)
+    from tqdm.auto import tqdm
+
+    return tqdm(
+        total=total,
+        initial=initial,
+        desc=desc,
+        unit=unit,
+        smoothing=0.1,
+        mininterval=1.0,
+        file=out,
+    )

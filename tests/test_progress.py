@@ -1,0 +1,121 @@
+"""Progress of long runs: timed lines in log files, bars on terminals, per-unit reports."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pytest
+
+from advgame.core.progress import LineProgress, Silent, progress
+from advgame.errors import ConfigError
+from advgame.runner.run import run_units
+
+
+class Clock:
+    """A settable time source."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_lines_come_at_the_interval_and_at_milestones_with_an_estimate() -> None:
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(1000, "train X", unit="step", interval=60, stream=out, clock=clock)
+    clock.now = 30
+    bar.update(100)
+    assert out.getvalue() == ""  # before the interval: nothing
+    clock.now = 60
+    bar.update(100)
+    (line,) = out.getvalue().splitlines()
+    # 200 of 1,000 in 60 s: 800 more at that rate is 240 s
+    assert line.endswith("train X: 200/1,000 steps (20 %), 60 s, about 4.0 min left")
+    bar.set_postfix_str("iteration 2/10")  # a milestone writes at once, and stays
+    assert out.getvalue().splitlines()[-1].endswith("about 4.0 min left; iteration 2/10")
+    written = out.getvalue()
+    bar.close()  # nothing moved since the last line
+    assert out.getvalue() == written
+    clock.now = 90
+    bar.update(800)
+    bar.close()
+    assert out.getvalue().splitlines()[-1].endswith("1,000/1,000 steps (100 %), 1.5 min; iteration 2/10")
+
+
+def test_counts_done_before_this_process_are_not_in_its_rate() -> None:
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(100, "evaluate", initial=40, stream=out, clock=clock)
+    bar.skip(10)  # read back from part files
+    clock.now = 100
+    bar.update(10)  # 10 units in 100 s: the 40 left take 400 s
+    bar.set_postfix_str("")
+    assert "60/100 units (60 %), 1.7 min, about 6.7 min left" in out.getvalue()
+
+
+def test_a_terminal_gets_a_bar_a_file_gets_lines_and_no_show_gets_nothing() -> None:
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    assert isinstance(progress(10, "x", show=False), Silent)
+    assert isinstance(progress(10, "x", stream=io.StringIO()), LineProgress)
+    bar = progress(10, "x", stream=Terminal())
+    assert not isinstance(bar, LineProgress) and hasattr(bar, "set_postfix_str")
+    bar.close()
+    assert isinstance(progress(10, "x", stream=Terminal(), lines=True), LineProgress)
+
+
+class Recorder:
+    """A progress object that wants to know which unit finished."""
+
+    def __init__(self) -> None:
+        self.events: list[tuple[str, int, bool]] = []
+
+    def units_started(self, count: int) -> None:
+        self.events.append(("started", count, False))
+
+    def unit_done(self, index: int, before: bool) -> None:
+        self.events.append(("done", index, before))
+
+
+def test_run_units_names_each_finished_unit_and_those_read_back(tmp_path: Path) -> None:
+    rec = Recorder()
+    run_units(abs, [-3, -1, -2], parts_dir=tmp_path, progress=rec)
+    assert rec.events == [("started", 3, False)] + [("done", i, False) for i in range(3)]
+    rec = Recorder()
+    run_units(abs, [-3, -5, -1, -2], parts_dir=tmp_path, progress=rec)
+    # three read back first (index 0, 2, 3), then one trained
+    assert rec.events == [
+        ("done", 0, True),
+        ("done", 2, True),
+        ("done", 3, True),
+        ("started", 1, False),
+        ("done", 1, False),
+    ]
+    out = io.StringIO()
+    lines = LineProgress(4, "units", stream=out, interval=0)
+    run_units(abs, [-3, -5, -1, -2], parts_dir=tmp_path, progress=lines)
+    assert lines.n == lines.initial == 4  # a plain LineProgress counts read-back units as before
+
+
+def test_a_training_run_logs_a_line_per_iteration(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from _training_helpers import PENDULUM, config
+
+    from advgame.training import resume, train
+
+    cfg = config("ppo", scenario=PENDULUM, iterations=2)
+    with pytest.raises(ConfigError, match="progress must be True, False or 'lines'"):
+        train(cfg, tmp_path / "bad", progress="bars")
+    train(cfg, tmp_path / "run", progress=True)  # stderr is not a terminal here: lines
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if "train InvertedPendulum-v5 run:" in ln]
+    assert len(lines) == 2, err
+    assert "iteration 1/2 in " in lines[0] and "protagonist return" in lines[0]
+    assert "256/256 steps (100 %)" in lines[1] and "iteration 2/2" in lines[1]
+    # a resumed run counts what was done before (nothing left here: no iteration line)
+    resume(tmp_path / "run", progress=False)
+    assert "train InvertedPendulum-v5" not in capsys.readouterr().err
