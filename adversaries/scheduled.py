@@ -64,6 +64,10 @@ class _Sinusoid:
         """
         self._next = int(index)
 
+    def episode_index(self) -> int:
+        """The index ``i`` of the episode played now (``start - 1`` before the first reset)."""
+        return self.episode
+
     def reset(self, seed: int | None = None) -> None:
         """Advance to the next episode index ``i`` (or the one `set_episode_index` gave)."""
         self.episode = self.episode + 1 if self._next is None else self._next

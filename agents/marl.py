@@ -338,6 +338,8 @@ class TeamLearner:
         learner.steps = int(state["steps"])
         learner.rng.bit_generator.state = state["rng"]
         learner.generator.set_state(state["generator"])
+        for env, where in zip(learner.envs, state.get("schedules", ()), strict=False):
+            env.resume_schedules(where)  # shifting tasks go on after the saved episodes
         return learner
 
     def close(self) -> None:
@@ -360,6 +362,7 @@ class TeamLearner:
             "total_steps": self.total_steps,
             "rng": self.rng.bit_generator.state,
             "generator": self.generator.get_state(),
+            "schedules": [env.schedule_positions() for env in self.envs],
         }
 
     def _record(self, scalars: Mapping[str, float]) -> None:

@@ -31,8 +31,8 @@ Where this differs from the authors' code, and why (also in docs/ompo.md):
   authors also push 256 extra resets before training (with a Hopper they come from the nominal
   body), which only exists so that a first batch can be drawn without replacement.
 * The temperature starts at `ent_coef`'s value (``"auto_0.2"``: the paper's table says α 0.2
-  with automatic tuning); the authors' code uses 0.2 for the very first critic update and then
-  ``exp(log α)`` from ``log α = 0``, i.e. α = 1.
+  with automatic tuning); the authors' code uses 0.2 for the very first critic and actor
+  update and then ``exp(log α)`` from ``log α = 0``, i.e. α = 1.
 * Rewards are whatever the views give (VecNormalize's if the run normalises); OMPO's ``+1``
   shift and clamp assume raw rewards, so its campaigns train with ``normalize = false``.
 """

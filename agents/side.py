@@ -8,6 +8,7 @@ number of steps (`Side.learn`), and checkpoints (`Side.save`, `Side.load`).
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -17,6 +18,8 @@ import numpy as np
 
 from advgame.agents.checkpoint import SB3Checkpoint
 from advgame.agents.stats import EpisodeStats, normalized
+from advgame.core.files import read_json
+from advgame.errors import FileFormatError
 
 __all__ = ["Side"]
 
@@ -143,6 +146,9 @@ class Side:
             self.venv.save(folder / f"{self.agent}_vecnormalize.pkl")
         if hasattr(self.model, "replay_buffer"):
             self.model.save_replay_buffer(folder / f"{self.agent}_replay.pkl")
+        positions = self.venv.env_method("schedule_positions")
+        if any(positions):  # per-episode schedules in the views: where each one is
+            (folder / f"{self.agent}_schedules.json").write_text(json.dumps(positions) + "\n")
         return SB3Checkpoint(
             str(path),
             self.learner.algo,
@@ -177,7 +183,20 @@ class Side:
         replay = folder / f"{agent}_replay.pkl"
         if replay.exists():
             model.load_replay_buffer(replay)
-        return cls(agent, learner, env_fns, 0, 0, model=model, venv=venv)
+        side = cls(agent, learner, env_fns, 0, 0, model=model, venv=venv)
+        schedules = folder / f"{agent}_schedules.json"
+        if schedules.exists():  # the views' schedules go on after the saved episodes
+            fix = "Delete the run's last checkpoint folder, or train the run again."
+            positions = read_json(schedules, "schedule positions", fix, list)
+            if len(positions) != venv.num_envs or not all(isinstance(p, dict) for p in positions):
+                raise FileFormatError(
+                    f"{schedules} should hold the schedule positions of {venv.num_envs} "
+                    f"view(s), got {positions!r}. {fix}",
+                    path=str(schedules),
+                )
+            for index, where in enumerate(positions):
+                side.venv.env_method("resume_schedules", where, indices=index)
+        return side
 
     def close(self) -> None:
         """Close the views."""

@@ -304,3 +304,23 @@ def test_learner_learns_to_hop(algo: str, tmp_path: Path) -> None:
     assert after > TRAINED_AT_LEAST, (before, after)
     assert np.mean(stats.true_returns[-5:]) > TRAINED_AT_LEAST, stats.true_returns[-5:]
     learner.close()
+
+
+def test_a_resumed_team_learner_goes_on_with_its_shifting_task(tmp_path: Path) -> None:
+    from advgame.adversaries import SinusoidAdversary
+
+    adversary = advgame.make(SID, preset="default").adversaries[0]
+    wave = {adversary: SinusoidAdversary(0.0, 0.01, 0.5, start=1)}
+
+    def fns() -> list[Any]:
+        return [team_factory(SID, wave, preset="default", max_episode_steps=40) for _ in range(2)]
+
+    learner = TeamLearner(MARL_LEARNERS["mappo"](**TINY), fns(), 0, 512)
+    learner.learn(256)  # episodes of 40 steps: several finished in each view
+    saved = [env.schedule_positions() for env in learner.envs]
+    assert all(p[adversary] > 2 for p in saved), saved
+    learner.save(tmp_path)
+    resumed = TeamLearner.load(tmp_path, MARL_LEARNERS["mappo"](**TINY), fns())
+    for env, where in zip(resumed.envs, saved, strict=True):
+        env.reset(seed=1)  # the next episode is the one after the saved one, not episode 1
+        assert env.schedule_positions() == {adversary: where[adversary] + 1}

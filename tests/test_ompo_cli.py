@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -26,6 +27,11 @@ def _args(run: Path, scenario: str = "Hopper-v5", preset: str = "ompo-nonstation
     ]  # fmt: skip
 
 
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
 def test_ompo_trains_on_the_shifting_hopper_resumes_and_evaluates(tmp_path: Path) -> None:
     from advgame.agents.ompo import OMPO
 
@@ -40,6 +46,17 @@ def test_ompo_trains_on_the_shifting_hopper_resumes_and_evaluates(tmp_path: Path
     assert main(["resume", str(run), "--no-progress"]) == 0
     second = OMPO.load(run / "checkpoints" / "iter_0002" / "protagonist.zip", device="cpu")
     assert second.counts["critic"] == 3 * (600 - 100)  # the update count carried on
+    # The shifting task went on where it stopped: the first run played episodes 1 .. 1 + e1
+    # (e1 finished, the last cut off); the resumed one starts at the next and plays e2 more.
+    finished = [int(r["protagonist_phase_episodes"]) for r in _rows(run / "progress.csv")]
+    at = [
+        json.loads(
+            (run / "checkpoints" / f"iter_000{i}" / "protagonist_schedules.json").read_text()
+        )
+        for i in (1, 2)
+    ]
+    assert at[0] == [{"dynamics_adversary": 1 + finished[0]}]
+    assert at[1] == [{"dynamics_adversary": at[0][0]["dynamics_adversary"] + 1 + finished[1]}]
     # only the latest checkpoint keeps its (large) replay buffer: a resume needs no other
     assert not (run / "checkpoints" / "iter_0001" / "protagonist_replay.pkl").exists()
     assert (run / "checkpoints" / "iter_0002" / "protagonist_replay.pkl").exists()

@@ -26,8 +26,10 @@ __all__ = [
     "build_policies",
     "filler_action",
     "reseed_policies",
+    "resume_schedules",
     "rollout",
     "rollout_batch",
+    "schedule_positions",
 ]
 
 
@@ -116,6 +118,29 @@ def reseed_policies(
     seeds = np.random.SeedSequence(seed).generate_state(len(policies))
     for s, p in zip(seeds, policies.values(), strict=True):
         p.reset(int(s))
+
+
+def schedule_positions(policies: Mapping[str, Policy]) -> dict[str, int]:
+    """The episode index each per-episode schedule among `policies` plays now (``{agent: i}``).
+
+    Policies with ``episode_index`` and ``set_episode_index`` (`advgame.core.policy.Policy`)
+    count. A training checkpoint saves these and `resume_schedules` restores them, so that a
+    resumed run's shifting task goes on where it stopped instead of starting its sequence again.
+    """
+    out = {}
+    for agent, p in policies.items():
+        where = getattr(p, "episode_index", None)
+        if callable(where) and callable(getattr(p, "set_episode_index", None)):
+            out[agent] = int(where())
+    return out
+
+
+def resume_schedules(policies: Mapping[str, Policy], positions: Mapping[str, int]) -> None:
+    """Make each schedule's next episode the one after its saved position (`schedule_positions`)."""
+    for agent, i in positions.items():
+        seek = getattr(policies.get(agent), "set_episode_index", None)
+        if seek is not None:
+            seek(int(i) + 1)
 
 
 def rollout(

@@ -56,7 +56,9 @@ class Policy(Protocol):
 # A policy that follows a per-episode schedule (a sinusoidal shift) may offer
 # ``set_episode_index(index)``: its next `reset` then starts episode `index` of its schedule
 # instead of the next of its own count (evaluation tables declare which episode each of their
-# episodes plays; `advgame.core.episodes.reseed_policies`). Optional too.
+# episodes plays; `advgame.core.episodes.reseed_policies`). Optional too. Such a policy may
+# also offer ``episode_index()``: the index of the episode it plays now, which a training
+# checkpoint saves so that a resumed run goes on with the next one (`advgame.core.views`).
 
 
 @runtime_checkable

@@ -22,7 +22,12 @@ from typing import Any, ClassVar
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from advgame.core.episodes import build_policies, reseed_policies
+from advgame.core.episodes import (
+    build_policies,
+    reseed_policies,
+    resume_schedules,
+    schedule_positions,
+)
 from advgame.core.game import Game, Move
 from advgame.errors import ActionError, ConfigError
 
@@ -135,6 +140,14 @@ class TeamView(ParallelEnv):
         self.game.close()
 
     # -- what the training loop calls -------------------------------------------------------
+    def schedule_positions(self) -> dict[str, int]:
+        """Where each embedded per-episode schedule is (`advgame.core.episodes.schedule_positions`)."""
+        return schedule_positions(self.policies)
+
+    def resume_schedules(self, positions: Mapping[str, int]) -> None:
+        """Go on after `positions` (`advgame.core.episodes.resume_schedules`)."""
+        resume_schedules(self.policies, positions)
+
     def set_policies(self, policies: Mapping[str, Any]) -> None:
         """Swap some embedded adversary policies (policies, specs or callables).
 

@@ -16,7 +16,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from advgame.core.episodes import build_policies, reseed_policies
+from advgame.core.episodes import (
+    build_policies,
+    reseed_policies,
+    resume_schedules,
+    schedule_positions,
+)
 from advgame.core.game import Game, Move
 from advgame.core.numpy_net import NetCache, NumpyNet, sb3_modules
 from advgame.core.policy import gaussian_mean
@@ -202,6 +207,14 @@ class SingleAgentView(gym.Env):
         for a in policies:
             self.policies[a] = built[a]
         self._players.clear()
+
+    def schedule_positions(self) -> dict[str, int]:
+        """Where each embedded per-episode schedule is (`advgame.core.episodes.schedule_positions`)."""
+        return schedule_positions(self.policies)
+
+    def resume_schedules(self, positions: Mapping[str, int]) -> None:
+        """Go on after `positions` (`advgame.core.episodes.resume_schedules`)."""
+        resume_schedules(self.policies, positions)
 
     def set_observation_scale(self, target: str, std: Any) -> None:
         """Set the normalizer std of `target` for normalized-space observation budgets."""
