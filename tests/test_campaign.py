@@ -52,7 +52,9 @@ def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(
     assert main([*first, "--stage", "train", "--runs", "ppo-s7"]) == 2
     assert "No run 'ppo-s7' in the campaign; its runs: ppo-s0" in capsys.readouterr().err
     # a chosen piece, with progress: stderr is a file here, so a line per iteration and run
-    assert main(["campaign", str(spec), "--workers", "1", "--stage", "train", "--runs", "ppo-s1"]) == 0
+    assert (
+        main(["campaign", str(spec), "--workers", "1", "--stage", "train", "--runs", "ppo-s1"]) == 0
+    )
     err = capsys.readouterr().err
     assert "train Hopper-v5 ppo-s1: 128/128 steps (100 %)" in err and "iteration 1/1 in" in err
     assert "campaign tiny: 1/1 runs (100 %)" in err and "finished: ppo-s1" in err

@@ -41,7 +41,11 @@ def test_lines_come_at_the_interval_and_at_milestones_with_an_estimate() -> None
     clock.now = 90
     bar.update(800)
     bar.close()
-    assert out.getvalue().splitlines()[-1].endswith("1,000/1,000 steps (100 %), 1.5 min; iteration 2/10")
+    assert (
+        out.getvalue()
+        .splitlines()[-1]
+        .endswith("1,000/1,000 steps (100 %), 1.5 min; iteration 2/10")
+    )
 
 
 def test_counts_done_before_this_process_are_not_in_its_rate() -> None:
