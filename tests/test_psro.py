@@ -110,7 +110,9 @@ def test_a_sigkilled_run_resumes_without_recomputing(whole_run: Path, tmp_path: 
     assert json.loads((run / "meta.json").read_text()) == load_meta(whole_run)  # as if never killed
 
 
-def test_the_psro_command_runs_and_resumes(tmp_path: Path) -> None:
+def test_the_psro_command_runs_and_resumes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from advgame.cli import main
 
     run = tmp_path / "cli"
@@ -124,6 +126,9 @@ def test_the_psro_command_runs_and_resumes(tmp_path: Path) -> None:
     args += ["--eval-seeds", "1", "--max-episode-steps", "20", "--solver", "uniform"]
     assert main(args) == 0
     (entry,) = load_meta(run)
+    err = capsys.readouterr().err  # a line per iteration (stderr is a file here)
+    assert "psro cli: 1/1 iterations (100 %)" in err
+    assert f"iteration 0: game value {entry['value']:,.1f}, 1 protagonists x 1 adversaries" in err
     assert entry["solver"] == "uniform" and entry["protagonists"] == ["protagonist@0"]
     assert json.loads((run / "config.json").read_text())["protagonist_hparams"] == {
         "n_steps": 32,

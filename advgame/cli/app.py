@@ -109,7 +109,8 @@ def _cmd_psro(args: argparse.Namespace) -> int:
     from advgame.core.config import from_dict, override, to_dict
     from advgame.workflows.psro import PSROConfig, resume_psro, run_psro
 
-    where = {"executor": args.executor, "workers": args.workers, "address": args.address}
+    where = {"executor": args.executor, "workers": args.workers, "address": args.address,
+             "progress": not args.no_progress}  # fmt: skip
     if args.resume:
         resume_psro(args.run_dir, **where)
     else:
@@ -210,6 +211,7 @@ def _psro_parser(sub: Any) -> None:
     )
     p.add_argument("--run-dir", required=True, help="the run directory")
     p.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
+    p.add_argument("--no-progress", action="store_true", help="no log line per iteration")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a config field with a JSON value (e.g. protagonist_hparams)")  # fmt: skip
     executor_arguments(p, workers=1)

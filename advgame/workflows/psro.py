@@ -133,8 +133,13 @@ def run_psro(
     workers: int = 1,
     address: str | None = None,
     max_retries: int = 2,
+    progress: bool = True,
 ) -> Path:
-    """Start a PSRO run in `run_dir` (which must not hold one) and run it to the end."""
+    """Start a PSRO run in `run_dir` (which must not hold one) and run it to the end.
+
+    `progress`: a time-stamped line on stderr per finished iteration (its game value and the
+    population's size, `advgame.core.progress.LineProgress`).
+    """
     run_dir = Path(run_dir)
     if (run_dir / "config.json").exists():
         raise ConfigError(
@@ -144,7 +149,7 @@ def run_psro(
     run_dir.mkdir(parents=True, exist_ok=True)
     save_json(config, run_dir / "config.json")
     return _PSRO(
-        config, run_dir, adversary, _Executor(executor, workers, address, max_retries)
+        config, run_dir, adversary, _Executor(executor, workers, address, max_retries), progress
     ).execute()
 
 
@@ -155,14 +160,18 @@ def resume_psro(
     workers: int = 1,
     address: str | None = None,
     max_retries: int = 2,
+    progress: bool = True,
 ) -> Path:
-    """Continue the PSRO run in `run_dir`: finished jobs are read back, not rerun."""
+    """Continue the PSRO run in `run_dir`: finished jobs are read back, not rerun.
+
+    `progress`: as `run_psro`.
+    """
     run_dir = Path(run_dir)
     if not (run_dir / "config.json").exists():
         raise ConfigError(f"No PSRO run in {run_dir} (no config.json); start one with run_psro.")
     config = load_json(PSROConfig, run_dir / "config.json")
     ex = _Executor(executor, workers, address, max_retries)
-    return _PSRO(config, run_dir, _adversary(config), ex).execute()
+    return _PSRO(config, run_dir, _adversary(config), ex, progress).execute()
 
 
 def load_meta(run_dir: str | Path) -> list[dict[str, Any]]:
@@ -202,11 +211,17 @@ def _adversary(config: PSROConfig) -> str:
 class _PSRO:
     """One run directory driven through its iterations."""
 
-    def __init__(self, cfg: PSROConfig, run_dir: Path, adversary: str, ex: _Executor) -> None:
+    def __init__(
+        self, cfg: PSROConfig, run_dir: Path, adversary: str, ex: _Executor, progress: bool
+    ) -> None:
+        from advgame.core.progress import progress as display
+
         self.cfg, self.dir, self.adversary, self.ex = cfg, run_dir, adversary, ex
         self.pop_path = run_dir / "population.json"
         self.population = Population.load(self.pop_path) if self.pop_path.exists() else Population()
         self.meta = load_meta(run_dir)
+        self.bar = display(cfg.iterations + 1, f"psro {run_dir.name}", unit="iteration",
+                           initial=len(self.meta), show=progress, lines=True)  # fmt: skip
         if not self.population.of(adversary):
             self.population.add(Member.noop(adversary))
 
@@ -266,6 +281,11 @@ class _PSRO:
         write_atomic(self.dir / "meta.json", json.dumps(self.meta, indent=2) + "\n")
         write_meta_report(self.dir, load_meta(self.dir))
         log.info("PSRO iteration %d: value %.3f", it, entry["value"])
+        self.bar.update()
+        self.bar.set_postfix_str(
+            f"iteration {it}: game value {entry['value']:,.1f}, "
+            f"{len(prots)} protagonists x {len(advs)} adversaries"
+        )
 
     # -- helpers ----------------------------------------------------------------------------
     def _members(self) -> tuple[list[Member], list[Member]]:
