@@ -16,16 +16,16 @@ class SARecurrentPPOConfig(RecurrentPPOConfig, SAPPOConfig):
     """An LSTM PPO with the state-adversarial regulariser (`advgame.agents.sa_recurrent`).
 
     The fields and checks of `RecurrentPPOConfig` and of `SAPPOConfig` (both inherited, so
-    both validate), with the ATLA-LSTM-SA Hopper defaults: κ = 0.3 (ATLA's number; its term is
-    twice our KL, see `advgame.agents.sa_recurrent`), ε = 0.075 in normalized units (Walker2d:
+    both validate), with the ATLA-LSTM-SA Hopper defaults: κ = 0.6 (ATLA's 0.3 on its term,
+    which is twice our KL, see `advgame.agents.sa_recurrent`), ε = 0.075 in normalized units (Walker2d:
     0.05), 2 PGD steps per minibatch, ε ramped up over the first 75 % of the run. Selected as
     ``--protagonist-algo sa-recurrent-ppo`` (method ``atla-lstm-sa``); like SA-PPO's, its
     checkpoints are plain files of the learner it extends: ``algo`` stays ``"recurrent-ppo"``,
     so a saved agent plays as an LSTM policy.
     """
 
-    sa_kappa: float = 0.3
-    """κ: weight of the regulariser (ATLA-LSTM-SA: 0.3)."""
+    sa_kappa: float = 0.6
+    """κ: weight of the regulariser on the KL (ATLA-LSTM-SA's 0.3 on twice the KL)."""
     sa_steps: int = 2
     """PGD steps of the inner maximisation per minibatch (ATLA-LSTM-SA: 2)."""
 

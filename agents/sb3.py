@@ -155,12 +155,13 @@ class PPOConfig(_SB3Config):
 class SAPPOConfig(PPOConfig):
     """SA-PPO: `PPOConfig` plus the state-adversarial regulariser (`advgame.agents.sa_ppo`).
 
-    Defaults are the SA-PPO/ATLA Hopper configs: κ = 0.1, ε = 0.075 in normalized units, 10
-    PGD steps, ε ramped up over the first 75 % of the run. Its checkpoints are plain PPO files.
+    Defaults are the SA-PPO/ATLA Hopper configs: κ = 0.2 (their 0.1 weighs Σ((μ̂ − μ)/σ)², which
+    is twice the KL this regulariser uses), ε = 0.075 in normalized units, 10 PGD steps, ε
+    ramped up over the first 75 % of the run. Its checkpoints are plain PPO files.
     """
 
-    sa_kappa: float = 0.1
-    """κ: weight of the regulariser."""
+    sa_kappa: float = 0.2
+    """κ: weight of the regulariser on the KL (ATLA's SA-PPO configs: 0.1 on twice the KL)."""
     sa_eps: float = 0.075
     """ε: the L∞ radius of the ball, in `sa_space` units (use the threat model's budget)."""
     sa_steps: int = 10

@@ -152,7 +152,7 @@ def test_with_kappa_zero_the_update_is_recurrent_ppos_and_kappa_changes_it(
 def test_the_config_checks_both_parents_and_saves_as_recurrent_ppo() -> None:
     cfg = learner_config("sa-recurrent-ppo", {"sa_eps": 0.05})
     assert cfg.algo == "recurrent-ppo" and cfg.model_class() is SARecurrentPPO
-    assert (cfg.sa_kappa, cfg.sa_steps, cfg.sa_eps, cfg.lstm_hidden_size) == (0.3, 2, 0.05, 64)
+    assert (cfg.sa_kappa, cfg.sa_steps, cfg.sa_eps, cfg.lstm_hidden_size) == (0.6, 2, 0.05, 64)
     for bad in ({"sa_kappa": -1.0}, {"sa_space": "pixels"}, {"lstm_hidden_size": 0}):
         with pytest.raises(ConfigError):
             learner_config("sa-recurrent-ppo", bad)
@@ -179,7 +179,7 @@ def test_the_method_trains_resumes_evaluates_and_plays_as_recurrent_ppo(
     assert "attack mad" in (out / "report.md").read_text()
     folder = run / "checkpoints" / "iter_0002"
     saved: Any = RecurrentPPO.load(folder / "protagonist.zip", device="cpu")
-    assert type(saved) is RecurrentPPO and vars(saved)["sa_kappa"] == 0.3  # sa_* ride along
+    assert type(saved) is RecurrentPPO and vars(saved)["sa_kappa"] == 0.6  # sa_* ride along
     spec = SB3Checkpoint(
         str(folder / "protagonist.zip"), "recurrent-ppo", str(folder / "protagonist_obs_norm.npz")
     )
