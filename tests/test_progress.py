@@ -48,6 +48,15 @@ def test_lines_come_at_the_interval_and_at_milestones_with_an_estimate() -> None
     )
 
 
+def test_no_estimate_where_units_differ_in_size() -> None:
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(5, "campaign x", unit="run", stream=out, clock=clock, estimate=False)
+    clock.now = 600
+    bar.update()
+    bar.set_postfix_str("finished: a")
+    assert out.getvalue().rstrip().endswith("campaign x: 1/5 runs (20 %), 10.0 min; finished: a")
+
+
 def test_counts_done_before_this_process_are_not_in_its_rate() -> None:
     out, clock = io.StringIO(), Clock()
     bar = LineProgress(100, "evaluate", initial=40, stream=out, clock=clock)

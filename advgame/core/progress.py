@@ -52,6 +52,8 @@ class LineProgress:
         interval: seconds between two lines written by `update` alone.
         stream: where lines go (default ``sys.stderr``).
         clock: the time source (seconds; for tests).
+        estimate: add the estimate of what is left (False where units differ widely in size,
+            such as a campaign's runs, some of them resumed).
 
     """
 
@@ -65,8 +67,10 @@ class LineProgress:
         interval: float = 300.0,
         stream: IO[str] | None = None,
         clock: Any = time.monotonic,
+        estimate: bool = True,
     ) -> None:
         self.total, self.desc, self.unit = int(total), desc, unit
+        self.estimate = estimate
         self.n = self.initial = int(initial)
         self.interval = float(interval)
         self.stream = stream
@@ -104,7 +108,7 @@ class LineProgress:
         share = f" ({100 * self.n / self.total:.0f} %)" if self.total > 0 else ""
         text = f"{self.desc}: {self.n:,}/{self.total:,} {self.unit}s{share}, {_duration(elapsed)}"
         done_here = self.n - self.initial
-        if 0 < done_here and self.n < self.total:
+        if self.estimate and 0 < done_here and self.n < self.total:
             left = (self.total - self.n) * elapsed / done_here
             text += f", about {_duration(left)} left"
         return f"{text}; {self.postfix}" if self.postfix else text

@@ -73,11 +73,14 @@ class _StatusEach:
     """Rewrites ``status.json`` each time a run finishes (the executor's progress hook)."""
 
     def __init__(self, campaign: Campaign, out: Path, training: Sequence[str], show: bool) -> None:
-        from advgame.core.progress import progress
+        from advgame.core.progress import LineProgress, Silent
 
         self.campaign, self.out, self.training = campaign, out, training
-        self.bar = progress(len(training), f"campaign {out.name}", unit="run", show=show,
-                            lines=True)  # fmt: skip
+        self.bar: Any = (  # runs differ in length (and some resume): no estimate of the rest
+            LineProgress(len(training), f"campaign {out.name}", unit="run", estimate=False)
+            if show
+            else Silent()
+        )
 
     def update(self) -> None:
         """One more unit finished: record what is on disk now."""
