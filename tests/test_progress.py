@@ -116,9 +116,8 @@ def test_run_units_names_each_finished_unit_and_those_read_back(tmp_path: Path) 
 def test_a_training_run_logs_a_line_per_iteration(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from _training_helpers import PENDULUM, config
-
     from advgame.training import resume, train
+    from tests._training_helpers import PENDULUM, config
 
     cfg = config("ppo", scenario=PENDULUM, iterations=2)
     with pytest.raises(ConfigError, match="progress must be True, False or 'lines'"):
