@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from advgame.core.progress import LineProgress, Silent, progress
+from advgame.core.progress import WINDOW, LineProgress, Silent, progress
 from advgame.errors import ConfigError
 from advgame.runner.run import run_units
 
@@ -46,6 +46,21 @@ def test_lines_come_at_the_interval_and_at_milestones_with_an_estimate() -> None
         .splitlines()[-1]
         .endswith("1,000/1,000 steps (100 %), 1.5 min; iteration 2/10")
     )
+
+
+def test_the_estimate_follows_the_recent_rate_after_a_pause() -> None:
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(10_100, "x", unit="step", stream=out, clock=clock, interval=1e9)
+    clock.now = 3600.0  # stopped for an hour before its first step
+    for _ in range(WINDOW):
+        clock.now += 10
+        bar.update(100)
+        bar.set_postfix_str("")
+    assert out.getvalue().splitlines()[-1].endswith("about 9.4 h left")  # the pause still counts
+    clock.now += 10
+    bar.update(100)
+    bar.set_postfix_str("")  # the window now starts after the pause: 100 steps per 10 s
+    assert out.getvalue().splitlines()[-1].endswith("about 15.0 min left")
 
 
 def test_no_estimate_where_units_differ_in_size() -> None:

@@ -13,9 +13,13 @@ from __future__ import annotations
 
 import sys
 import time
+from collections import deque
 from typing import IO, Any
 
-__all__ = ["LineProgress", "Silent", "progress"]
+__all__ = ["WINDOW", "LineProgress", "Silent", "progress"]
+
+WINDOW = 10
+"""Lines over which `LineProgress` measures the rate behind its estimate of the time left."""
 
 
 class Silent:
@@ -78,6 +82,9 @@ class LineProgress:
         self.start = self.last = clock()
         self.postfix = ""
         self.written = self.n
+        self.marks: deque[tuple[float, int]] = deque([(self.start, self.n)], maxlen=WINDOW)
+        """(time, count) at the last lines: the estimate uses the rate since the oldest, so a
+        pause (a process stopped for a while) leaves it after `WINDOW` lines."""
 
     def update(self, n: int = 1) -> None:
         """Count `n` more; write a line if `interval` seconds passed since the last one."""
@@ -90,6 +97,7 @@ class LineProgress:
         self.n += n
         self.initial += n
         self.written = self.n
+        self.marks = deque(((t, c + n) for t, c in self.marks), maxlen=WINDOW)
 
     def set_postfix_str(self, text: str = "") -> None:
         """Mark a milestone: `text` ends this and later lines, and a line is written now."""
@@ -107,9 +115,9 @@ class LineProgress:
         elapsed = now - self.start
         share = f" ({100 * self.n / self.total:.0f} %)" if self.total > 0 else ""
         text = f"{self.desc}: {self.n:,}/{self.total:,} {self.unit}s{share}, {_duration(elapsed)}"
-        done_here = self.n - self.initial
-        if self.estimate and 0 < done_here and self.n < self.total:
-            left = (self.total - self.n) * elapsed / done_here
+        since, count = self.marks[0]
+        if self.estimate and count < self.n < self.total:
+            left = (self.total - self.n) * (now - since) / (self.n - count)
             text += f", about {_duration(left)} left"
         return f"{text}; {self.postfix}" if self.postfix else text
 
@@ -119,6 +127,7 @@ class LineProgress:
         stamp = time.strftime("%H:%M:%S")
         print(f"[{stamp}] {self.line()}", file=stream, flush=True)
         self.last, self.written = self.clock(), self.n
+        self.marks.append((self.last, self.n))
 
 
 def progress(
