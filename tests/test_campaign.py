@@ -207,6 +207,11 @@ def test_the_zoo_campaign_files_load() -> None:
         assert campaign.runs()
         split = [r for m in campaign.methods for r in campaign.method_runs(m)]
         assert split == campaign.runs()  # each run in exactly its method's ("atla" ≠ "atla-sa")
+        if "atla-lstm-sa" in campaign.methods:  # ATLA's kappa 0.3 weighs twice our KL
+            from advgame.agents import SARecurrentPPOConfig
+
+            hparams = campaign.config("atla-lstm-sa-s0").protagonist_hparams
+            assert hparams["sa_kappa"] == SARecurrentPPOConfig().sa_kappa == 2 * 0.3, path
 
 
 def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
