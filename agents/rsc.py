@@ -39,7 +39,11 @@ from torch.nn import functional as F
 
 from advgame.agents.rsc_model import CausalWorldModel, perturb_states
 
-__all__ = ["RSC", "one_step_samples"]
+__all__ = ["MODE_ERROR_EVERY", "RSC", "one_step_samples"]
+
+MODE_ERROR_EVERY = 100
+"""World-model updates between two measurements of its error under the most probable graph
+(``train/model_error_mode``: the graph the augmented rows are generated under)."""
 
 
 def one_step_samples(buffer: ReplayBuffer, count: int, env: Any = None) -> ReplayBufferSamples:
@@ -211,6 +215,12 @@ class RSC(SAC):
         self.logger.record(
             "train/graph_density", float(self.world_model.edge_probabilities().detach().mean())
         )
+        if self.counts["model"] % MODE_ERROR_EVERY < gradient_steps:  # the generator's error
+            pool = one_step_samples(self.replay_buffer, batch_size, self._vec_normalize_env)  # type: ignore[arg-type]
+            error = self.world_model.mode_error(
+                pool.observations, pool.actions, pool.next_observations, pool.rewards
+            )
+            self.logger.record("train/model_error_mode", error)
         self.logger.record("train/augmented_rows", self.augmented_rows(batch_size))
 
     def _sac_step(self, data: ReplayBufferSamples, logs: dict[str, list[float]]) -> None:

@@ -177,6 +177,19 @@ class CausalWorldModel(nn.Module):
         return float(loss.item())
 
     @th.no_grad()
+    def mode_error(
+        self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor
+    ) -> float:
+        """Mean squared error per output, standardised, under the most probable graph.
+
+        What the augmented rows are generated under (`predict`); the training loss draws a
+        graph per row instead, so the two can differ (logged as ``train/model_error_mode``).
+        """
+        x = self.inputs.normalize(th.cat([obs, actions], dim=1).float())
+        y = self.targets.normalize(th.cat([next_obs, rewards.reshape(-1, 1)], dim=1).float())
+        return float(((self(x, self.mode_graph()) - y) ** 2).mean())
+
+    @th.no_grad()
     def predict(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
         """``(s', r)`` under the most probable graph, in the data's own units (r: shape (n, 1))."""
         x = self.inputs.normalize(th.cat([obs, actions], dim=1).float())

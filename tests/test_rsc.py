@@ -88,6 +88,22 @@ def test_learned_graph_drops_the_spurious_edges_and_keeps_the_causal_ones(traine
     assert float(edges[REWARD, A]) < 0.2  # r = -x² does not depend on this step's action
 
 
+def test_the_generators_graph_predicts_as_well_as_the_drawn_ones(trained) -> None:
+    th.manual_seed(2)
+    pool = one_step_samples(trained.replay_buffer, 1024)
+    args = (pool.observations, pool.actions, pool.next_observations, pool.rewards)
+    error = trained.world_model.mode_error(*args)
+    untrained = _model()
+    untrained.world_model.inputs, untrained.world_model.targets = (
+        trained.world_model.inputs,
+        trained.world_model.targets,
+    )
+    assert error < 0.1 * untrained.world_model.mode_error(*args)
+    drawn, _ = trained.world_model.losses(*args)  # sum over outputs / 2σ², drawn graphs
+    outputs = trained.world_model.edge_probabilities().shape[0]
+    assert error < 2 * float(drawn) * 2 * trained.world_model.sigma**2 / outputs
+
+
 def test_augmentation_weakens_the_spurious_correlation(trained) -> None:
     th.manual_seed(1)
     pool = one_step_samples(trained.replay_buffer, 1024)
