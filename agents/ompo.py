@@ -105,6 +105,14 @@ class OMPOReplayBuffer(ReplayBuffer):
         """First observations of the episodes (unnormalized), oldest first, at most buffer_size."""
         self._starts = np.ones(self.n_envs, dtype=bool)
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickle for a resumed run, whose views start fresh episodes.
+
+        The next transition of every env is then an episode's first (its state an s₀).
+        """
+        self.__dict__.update(state)
+        self._starts = np.ones(self.n_envs, dtype=bool)
+
     def add(self, obs: Any, next_obs: Any, action: Any, reward: Any, done: Any, infos: Any) -> None:
         """Store a transition; an episode's first one also stores its observation as an s₀."""
         for i in np.nonzero(self._starts)[0]:

@@ -195,6 +195,16 @@ def test_save_load_keeps_the_discriminator_and_the_counts(tmp_path) -> None:
     assert th.equal(back.discriminator.logit(x), model.discriminator.logit(x))
     assert back.counts == model.counts and back.since_discriminator == model.since_discriminator
     assert len(back.replay_buffer.initial) == len(model.replay_buffer.initial) > 0
+    # a resumed run starts fresh episodes: its first state is an s₀ (mid-episode when saved)
+    model.replay_buffer._starts[:] = False
+    model.save_replay_buffer(tmp_path / "r.pkl")
+    back.load_replay_buffer(tmp_path / "r.pkl")
+    buf = back.replay_buffer
+    before = len(buf.initial)
+    obs = np.full((buf.n_envs, *buf.obs_shape), 7.0, dtype=np.float32)
+    act = np.zeros((buf.n_envs, buf.action_dim), dtype=np.float32)
+    buf.add(obs, obs, act, np.zeros(buf.n_envs), np.zeros(buf.n_envs), [{}] * buf.n_envs)
+    assert len(buf.initial) == before + buf.n_envs and float(buf.initial[-1][0]) == 7.0
 
 
 def test_refuses_discrete_actions_before_training() -> None:
