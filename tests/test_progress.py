@@ -63,6 +63,19 @@ def test_the_estimate_follows_the_recent_rate_after_a_pause() -> None:
     assert out.getvalue().splitlines()[-1].endswith("about 15.0 min left")
 
 
+def test_a_milestone_with_a_count_is_one_line() -> None:
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(4, "runs", unit="run", stream=out, clock=clock, interval=60)
+    clock.now = 3600  # long past the interval, as a unit of hours is
+    bar.set_postfix_str("finished: a", refresh=False)
+    assert out.getvalue() == ""
+    bar.update()
+    (line,) = out.getvalue().splitlines()
+    assert "runs: 1/4 runs (25 %)" in line and line.endswith("; finished: a")
+    bar.update()  # no milestone pending, the interval not passed again: nothing
+    assert len(out.getvalue().splitlines()) == 1
+
+
 def test_no_estimate_where_units_differ_in_size() -> None:
     out, clock = io.StringIO(), Clock()
     bar = LineProgress(5, "campaign x", unit="run", stream=out, clock=clock, estimate=False)

@@ -6,7 +6,8 @@ tqdm bar when the stream is a terminal and a `LineProgress` otherwise: one line 
 time, the count, the share done, the elapsed time and an estimate of what is left, at most every
 `LineProgress.interval` seconds and whenever a caller marks a milestone (`set_postfix_str`,
 e.g. an iteration or a unit finished). Both have tqdm's ``update``, ``set_postfix_str`` and
-``close``, so callers drive either the same way.
+``close``, so callers drive either the same way; as with tqdm, a milestone that comes with a
+count is ``set_postfix_str(text, refresh=False)`` then ``update(n)``: one line, with both.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ class Silent:
     def update(self, n: int = 1) -> None:
         """Nothing to show."""
 
-    def set_postfix_str(self, text: str = "") -> None:
+    def set_postfix_str(self, text: str = "", refresh: bool = True) -> None:
         """Nothing to show."""
 
     def close(self) -> None:
@@ -81,15 +82,17 @@ class LineProgress:
         self.clock = clock
         self.start = self.last = clock()
         self.postfix = ""
+        self.pending = False
+        """A milestone set without a line (``refresh=False``): the next `update` writes it."""
         self.written = self.n
         self.marks: deque[tuple[float, int]] = deque([(self.start, self.n)], maxlen=WINDOW)
         """(time, count) at the last lines: the estimate uses the rate since the oldest, so a
         pause (a process stopped for a while) leaves it after `WINDOW` lines."""
 
     def update(self, n: int = 1) -> None:
-        """Count `n` more; write a line if `interval` seconds passed since the last one."""
+        """Count `n` more; write a line for a pending milestone or after `interval` seconds."""
         self.n += n
-        if self.clock() - self.last >= self.interval:
+        if self.pending or self.clock() - self.last >= self.interval:
             self.write()
 
     def skip(self, n: int) -> None:
@@ -99,10 +102,17 @@ class LineProgress:
         self.written = self.n
         self.marks = deque(((t, c + n) for t, c in self.marks), maxlen=WINDOW)
 
-    def set_postfix_str(self, text: str = "") -> None:
-        """Mark a milestone: `text` ends this and later lines, and a line is written now."""
+    def set_postfix_str(self, text: str = "", refresh: bool = True) -> None:
+        """Mark a milestone: `text` ends this and later lines.
+
+        A line is written now, or with ``refresh=False`` at the next `update` (tqdm's
+        signature: a milestone that comes with a count is then one line).
+        """
         self.postfix = text
-        self.write()
+        if refresh:
+            self.write()
+        else:
+            self.pending = True
 
     def close(self) -> None:
         """Write a last line if the count moved since the previous one."""
@@ -126,7 +136,7 @@ class LineProgress:
         stream = self.stream if self.stream is not None else sys.stderr
         stamp = time.strftime("%H:%M:%S")
         print(f"[{stamp}] {self.line()}", file=stream, flush=True)
-        self.last, self.written = self.clock(), self.n
+        self.last, self.written, self.pending = self.clock(), self.n, False
         self.marks.append((self.last, self.n))
 
 

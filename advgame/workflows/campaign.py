@@ -86,8 +86,8 @@ class _StatusEach:
         """One more unit finished: record what is on disk now."""
         status = write_status(self.campaign, self.out, training=self.training)
         done = [r for r in self.training if status["runs"][r]["state"] == "done"]
+        self.bar.set_postfix_str(f"finished: {', '.join(done)}", refresh=False)
         self.bar.update()
-        self.bar.set_postfix_str(f"finished: {', '.join(done)}")
 
 
 def _train_unit(unit: tuple[Any, str, str, bool | str]) -> str:

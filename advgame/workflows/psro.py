@@ -281,11 +281,12 @@ class _PSRO:
         write_atomic(self.dir / "meta.json", json.dumps(self.meta, indent=2) + "\n")
         write_meta_report(self.dir, load_meta(self.dir))
         log.info("PSRO iteration %d: value %.3f", it, entry["value"])
-        self.bar.update()
         self.bar.set_postfix_str(
             f"iteration {it}: game value {entry['value']:,.1f}, "
-            f"{len(prots)} protagonists x {len(advs)} adversaries"
+            f"{len(prots)} protagonists x {len(advs)} adversaries",
+            refresh=False,
         )
+        self.bar.update()
 
     # -- helpers ----------------------------------------------------------------------------
     def _members(self) -> tuple[list[Member], list[Member]]:

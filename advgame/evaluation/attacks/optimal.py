@@ -311,10 +311,11 @@ class _CandidateProgress:
             getattr(self.bar, "skip", self.bar.update)(unit.steps)
             return
         self.trained += 1
-        self.bar.update(unit.steps)
         self.bar.set_postfix_str(
-            f"candidate {unit.name} trained ({unit.steps:,} steps; {self.trained} this run)"
+            f"candidate {unit.name} trained ({unit.steps:,} steps; {self.trained} this run)",
+            refresh=False,
         )
+        self.bar.update(unit.steps)
 
 
 def write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:
