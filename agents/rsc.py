@@ -129,13 +129,20 @@ class RSC(SAC):
             return 0
         return round(self.augmented_ratio * batch_size)
 
-    def update_world_model(self, batch_size: int) -> float:
-        """One world-model update on `batch_size` one-step replay transitions; returns its loss."""
+    def update_world_model(
+        self, batch_size: int, logs: dict[str, list[float]] | None = None
+    ) -> float:
+        """One world-model update on `batch_size` one-step replay transitions; returns its loss.
+
+        Every `MODE_ERROR_EVERY` updates the same batch also measures the error under the most
+        probable graph, into ``logs["model_error_mode"]`` (no extra draw from the replay).
+        """
         data = one_step_samples(self.replay_buffer, batch_size, self._vec_normalize_env)  # type: ignore[arg-type]
-        loss = self.world_model.update(
-            data.observations, data.actions, data.next_observations, data.rewards
-        )
+        batch = (data.observations, data.actions, data.next_observations, data.rewards)
+        loss = self.world_model.update(*batch)
         self.counts["model"] += 1
+        if logs is not None and self.counts["model"] % MODE_ERROR_EVERY == 0:
+            logs["model_error_mode"].append(self.world_model.mode_error(*batch))
         return loss
 
     def augment(self, data: ReplayBufferSamples, rows: int) -> ReplayBufferSamples:
@@ -206,7 +213,7 @@ class RSC(SAC):
         update_learning_rate(self.critic.optimizer, self.critic_learning_rate)
         logs: dict[str, list[float]] = defaultdict(list)
         for _ in range(gradient_steps):
-            logs["model_loss"].append(self.update_world_model(batch_size))
+            logs["model_loss"].append(self.update_world_model(batch_size, logs))
             data = self.mixed_batch(batch_size)
             self._sac_step(data, logs)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
@@ -215,12 +222,6 @@ class RSC(SAC):
         self.logger.record(
             "train/graph_density", float(self.world_model.edge_probabilities().detach().mean())
         )
-        if self.counts["model"] % MODE_ERROR_EVERY < gradient_steps:  # the generator's error
-            pool = one_step_samples(self.replay_buffer, batch_size, self._vec_normalize_env)  # type: ignore[arg-type]
-            error = self.world_model.mode_error(
-                pool.observations, pool.actions, pool.next_observations, pool.rewards
-            )
-            self.logger.record("train/model_error_mode", error)
         self.logger.record("train/augmented_rows", self.augmented_rows(batch_size))
 
     def _sac_step(self, data: ReplayBufferSamples, logs: dict[str, list[float]]) -> None:
