@@ -159,6 +159,29 @@ def test_every_file_is_under_the_limit() -> None:
     assert not long, f"files over {MAX_LINES} lines: {long}"
 
 
+def test_every_source_folder_is_a_package_and_nothing_in_it_is_ignored() -> None:
+    """A fresh clone has every module: each folder has an ``__init__``, no ``.py`` is git-ignored.
+
+    (``advgame/reports/__init__.py`` once matched a ``reports/`` line meant for output folders:
+    the checkout had it, a clone did not, and the folder became a namespace package.)
+    """
+    import shutil
+    import subprocess
+
+    folders = {p.parent for p in MODULES.values()}
+    bare = sorted(str(f.relative_to(ROOT)) for f in folders if not (f / "__init__.py").exists())
+    assert not bare, f"folders without an __init__.py: {bare}"
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout")
+    paths = "\n".join(str(p.relative_to(ROOT)) for p in MODULES.values())
+    out = subprocess.run(
+        ["git", "check-ignore", "--no-index", "--stdin"],
+        cwd=ROOT, input=paths, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    ignored = out.stdout.split()
+    assert not ignored, f"source files a clone would lack (.gitignore matches them): {ignored}"
+
+
 def test_package_inits_hold_no_logic() -> None:
     """Each folder's ``__init__`` opens with what the folder is for and defines nothing."""
     for name, path in MODULES.items():
