@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import time
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -208,12 +211,39 @@ def test_a_batch_too_cheap_to_share_stays_on_the_calling_thread(
         env.reset(seed=i)
     monkeypatch.setattr(ThreadedStepper, "MIN_BATCH_SECONDS", 1e9)
     alone, shared = ThreadedStepper(2), ThreadedStepper(2)
-    for _ in range(3):
+    for _ in range(ThreadedStepper.PROBES + 3):
         alone.step(envs, np.full((4, 3), 0.3), nstep=4)
-    assert alone._pool is None  # measured once, then judged not worth a second thread
+    assert alone._pool is None  # measured, then judged not worth a second thread
     monkeypatch.setattr(ThreadedStepper, "MIN_BATCH_SECONDS", 0.0)
-    for _ in range(3):
+    for _ in range(ThreadedStepper.PROBES + 3):
         shared.step(twins, np.full((4, 3), 0.3), nstep=4)
-    assert shared._pool is not None
+    assert shared._pool is not None  # measured PROBES times on the calling thread, then split
     assert all(np.array_equal(a.data.qpos, b.data.qpos) for a, b in zip(envs, twins, strict=True))
     shared.close()
+
+
+def test_a_slow_first_step_does_not_split_a_cheap_batch_for_good(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The cost is the cheapest step seen: a slow first one (imports, cold caches, a preempted
+    step) once made every later step of four Walker2d envs go to a second thread."""
+    envs = [gym.make("Walker2d-v5").unwrapped for _ in range(4)]
+    for i, env in enumerate(envs):
+        env.reset(seed=i)
+    monkeypatch.setattr(ThreadedStepper, "MIN_BATCH_SECONDS", 0.02)  # 5 ms an env: far above
+    run, first = ThreadedStepper._run, [True]
+
+    def slow_once(*args: Any) -> None:
+        if first[0]:
+            first[0] = False
+            time.sleep(0.05)  # 12.5 ms an env: the first step alone says "split"
+        run(*args)
+
+    monkeypatch.setattr(ThreadedStepper, "_run", staticmethod(slow_once))
+    stepper = ThreadedStepper(2)
+    for _ in range(3 * ThreadedStepper.PROBES):
+        stepper.step(envs, np.zeros((4, 6)), nstep=4)
+    assert stepper._pool is None
+    (cost,) = stepper._cost.values()
+    assert cost * 4 < 0.02
+    stepper.close()

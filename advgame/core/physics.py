@@ -54,8 +54,13 @@ class ThreadedStepper:
     """Advance MuJoCo simulations `nstep` substeps each, split over `threads` threads.
 
     A batch is split over the threads only when it is worth it: each kind of model's cost per
-    env step is measured on the calling thread first, and a step whose envs would take less
-    than `MIN_BATCH_SECONDS` on one thread stays there.
+    env step is measured on the calling thread (its first `PROBES` steps, then one step in
+    every `REPROBE`, and every step that stays there), the cheapest step seen is its cost, and a
+    step whose envs would take less than `MIN_BATCH_SECONDS` on one thread stays there. The
+    cheapest, not the latest: a first step (imports, cold caches) or a step preempted by another
+    process takes longer, never less, and one such step must not send every later step of a
+    small batch to a second thread (it did: on a busy 2-core machine the first Walker2d step
+    measured 100 µs per env, so four envs were split for the rest of the run).
 
     Args:
         threads: simulator threads (``None``: `default_threads`), the calling thread included:
@@ -79,6 +84,12 @@ class ThreadedStepper:
     8 HalfCheetah copies, about 200 µs of simulation, and win at 8 Hopper copies, about 400).
     """
 
+    PROBES = 8
+    """Steps of each kind of model measured on the calling thread before any is split."""
+
+    REPROBE = 512
+    """A split kind is measured on the calling thread again once in this many steps."""
+
     def __init__(self, threads: int | None = None) -> None:
         if threads is None:
             threads = default_threads()
@@ -88,7 +99,8 @@ class ThreadedStepper:
         """The most threads a step uses (a step of fewer envs, or of cheap ones, uses fewer)."""
         self._pool: ThreadPoolExecutor | None = None
         self._pid = os.getpid()
-        self._cost: dict[tuple[int, ...], float] = {}  # seconds per env step, on one thread
+        self._cost: dict[tuple[int, ...], float] = {}  # cheapest seconds per env step, one thread
+        self._calls: dict[tuple[int, ...], int] = {}  # steps of each kind so far
 
     def step(
         self,
@@ -116,12 +128,18 @@ class ThreadedStepper:
             return
         model = owners[0].model
         key = (model.nq, model.nv, model.nbody, model.ngeom, model.nu, nstep)
-        cost = self._cost.get(key)
-        if cost is None or cost * n < self.MIN_BATCH_SECONDS:  # measure, on this thread
+        cost, calls = self._cost.get(key), self._calls.get(key, 0)
+        self._calls[key] = calls + 1
+        if (
+            cost is None
+            or calls < self.PROBES
+            or calls % self.REPROBE == 0
+            or cost * n < self.MIN_BATCH_SECONDS
+        ):  # measure, on this thread
             start = time.perf_counter()
             self._run(owners, ctrl, nstep, post_constraint, 0, n)
             seen = (time.perf_counter() - start) / n
-            self._cost[key] = seen if cost is None else 0.9 * cost + 0.1 * seen
+            self._cost[key] = seen if cost is None else min(cost, seen)
             return
         if self._pool is None or self._pid != os.getpid():  # a forked child has no threads
             self._pid = os.getpid()
