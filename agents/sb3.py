@@ -23,9 +23,14 @@ __all__ = [
 class LinearDecay:
     """Learning rate decaying linearly to 0 over a whole alternating run.
 
-    SB3 restarts its progress counter at every ``learn()`` call; the training loop sets
-    `offset` (steps this learner did before the call) and `span` (steps in the call) so the
-    decay follows the run's total steps instead.
+    SB3 gives a schedule ``progress_remaining = 1 − t / (t₀ + n)`` in a ``learn(n)`` call begun
+    at step ``t₀`` (``reset_num_timesteps=False``), so it reaches 0 at the end of every call.
+    Whoever calls ``learn`` sets `offset` (``t₀``, the model's step count before the call) and
+    `span` (``n``); the step the schedule is at is then ``(1 − progress_remaining)(t₀ + n)``
+    and the rate ``initial · (1 − t / total)``, the same however the run is cut into calls.
+    (Until 27 Nov it read ``t₀ + (1 − progress_remaining) n``, as if SB3 restarted its counter
+    per call: a call's rate then lagged by up to its own length, about 1 % of the initial rate
+    in a 122-iteration run and up to 19 % in the four chunks of a best response.)
     """
 
     def __init__(self, initial: float, total: int) -> None:
@@ -36,7 +41,7 @@ class LinearDecay:
 
     def __call__(self, progress_remaining: float) -> float:
         """The learning rate at SB3's `progress_remaining` of the current ``learn()`` call."""
-        done = self.offset + (1.0 - progress_remaining) * self.span
+        done = (1.0 - progress_remaining) * (self.offset + self.span)
         return self.initial * max(1.0 - done / self.total, 0.0)
 
 
