@@ -9,8 +9,8 @@ method the median agent and the spread over seeds, a cost table for safe campaig
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np

@@ -32,6 +32,7 @@ from advgame.runner.units import (
     init_worker,
     pickled,
     retry,
+    scratch_dir,
     ship,
     timed,
 )
@@ -65,7 +66,8 @@ def run_local(
                 rec.attempts += 1
                 rec.extra["submitted"] = time.time()
                 try:
-                    out = timed(fn, unit)  # no pickling: lambdas and live policies work
+                    # no pickling: lambdas and live policies work
+                    out = timed(fn, unit, scratch=scratch_dir(opts, rec.key))
                 except AdvgameError:
                     raise
                 except Exception as exc:
@@ -84,12 +86,14 @@ def run_local(
     return recs
 
 
-def _marked(marks: str, key: str, fn_blob: bytes, blob: bytes, files: dict) -> dict[str, Any]:
+def _marked(
+    marks: str, key: str, fn_blob: bytes, blob: bytes, files: dict, scratch: str | None = None
+) -> dict[str, Any]:
     """`execute`, leaving a start mark in `marks` that only a finished unit removes."""
     mark = Path(marks) / key
     mark.write_text(str(os.getpid()))
     try:
-        return execute(fn_blob, blob, files)
+        return execute(fn_blob, blob, files, scratch)
     finally:
         mark.unlink()
 
@@ -142,7 +146,8 @@ def _round(
         for i in pending:
             recs[i].attempts += 1
             recs[i].extra["submitted"] = time.time()
-            args = (marks, recs[i].key, fn_blob, blobs[i], files[i])
+            args = (marks, recs[i].key, fn_blob, blobs[i], files[i],
+                    scratch_dir(opts, recs[i].key))  # fmt: skip
             futures[pool.submit(_marked, *args)] = i
         for fut in as_completed(futures):
             i = futures[fut]

@@ -109,6 +109,7 @@ def run_units(
     ship_files: bool | None = None,
     start_method: str = "forkserver",
     progress: Any = None,
+    scratch: bool = False,
 ) -> list[UnitRecord]:
     """Run ``fn(unit)`` for every unit on `executor`; return one `UnitRecord` per unit, in order.
 
@@ -132,6 +133,13 @@ def run_units(
             read back (for progress weighted by unit, such as the optimal attack's
             candidates of different lengths), and ``units_started(count)`` if it has one,
             once the read-back units are counted and `count` units start.
+        scratch: give each unit ``<parts_dir>/<key>.scratch/`` (`advgame.core.scratch`: the
+            local executor only), which outlives an interruption and goes once the unit's part
+            file is written: a unit that saves its progress there goes on from its last save
+            when run again, instead of from the start. Such a unit's result then depends on
+            where it was interrupted (its episodes restart at the save), so this is for long
+            units where that is the lesser cost (the optimal attack's candidates), not for
+            runs that promise the result of an uninterrupted run (PSRO).
 
     """
     _check(executor, workers, max_retries, start_method)
@@ -155,7 +163,8 @@ def run_units(
 
     run = {"local": _local.run_local, "ray": _ray.run_ray}[executor]
     fresh = run(fn, [units[i] for i in todo], [keys[i] for i in todo], Options(
-        workers, address, max_retries, parts, ship_files, start_method, ticks))  # fmt: skip
+        workers, address, max_retries, parts, ship_files, start_method, ticks,
+        scratch and executor == "local"))  # fmt: skip
     for i, rec in zip(todo, fresh, strict=True):
         records[i] = rec
     failed = [(units[i], r.error) for i, r in enumerate(records) if r is not None and r.error]

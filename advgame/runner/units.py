@@ -13,6 +13,7 @@ import hashlib
 import logging
 import os
 import pickle
+import shutil
 import socket
 import sys
 import tempfile
@@ -227,25 +228,47 @@ def _forget_rewritten(unit: Any) -> None:
         checkpoint.load_model.cache_clear()
 
 
-def timed(fn: Callable[[Any], Any], unit: Any, start: float | None = None) -> dict[str, Any]:
-    """``fn(unit)``'s value and timing (`UnitRecord` fields), from `start` (default: now)."""
+def timed(
+    fn: Callable[[Any], Any], unit: Any, start: float | None = None, scratch: str | None = None
+) -> dict[str, Any]:
+    """``fn(unit)``'s value and timing (`UnitRecord` fields), from `start` (default: now).
+
+    `scratch`: the unit's scratch folder (`advgame.core.scratch`), None for none.
+    """
+    from advgame.core.scratch import scratch_folder
+
     start = time.time() if start is None else start
     _FIRST.clear()
-    value = fn(unit)
+    with scratch_folder(Path(scratch) if scratch else None):
+        value = fn(unit)
     end = time.time()
     startup = _FIRST[0] - start if _FIRST else None
     return {"value": value, "startup_s": startup, "pid": os.getpid(), "start": start, "end": end}
 
 
-def execute(fn_blob: bytes, unit_blob: bytes, files: dict[str, bytes]) -> dict[str, Any]:
+def execute(
+    fn_blob: bytes, unit_blob: bytes, files: dict[str, bytes], scratch: str | None = None
+) -> dict[str, Any]:
     """Run one unit in a worker; return its value and timing (`UnitRecord` fields).
 
     The clock starts before the unit is unpickled and its files written: start-up included.
+    `scratch`: the unit's scratch folder (see `scratch_dir`).
     """
     start = time.time()
     fn, unit = _loads(fn_blob), _materialize(_loads(unit_blob), files)
     _forget_rewritten(unit)
-    return {**timed(fn, unit, start), "host": socket.gethostname()}
+    return {**timed(fn, unit, start, scratch), "host": socket.gethostname()}
+
+
+def scratch_dir(opts: Options, key: str) -> str | None:
+    """Unit `key`'s scratch folder, ``<parts>/<key>.scratch``, where the run asked for one.
+
+    Only with part files (`opts.parts`) and `opts.scratch`; removed by `finish` once the unit's
+    part file is written (`advgame.core.scratch`).
+    """
+    if opts.parts is None or not opts.scratch:
+        return None
+    return str(opts.parts / f"{key}.scratch")
 
 
 @dataclass(frozen=True)
@@ -260,6 +283,8 @@ class Options:
     start_method: str
     progress: Any
     """What a finished unit is reported to (``done(key)``; `advgame.runner.run`)."""
+    scratch: bool = False
+    """Give each unit a scratch folder beside its part file (`scratch_dir`)."""
 
 
 def finish(rec: UnitRecord, out: dict[str, Any], opts: Options) -> UnitRecord:
@@ -269,6 +294,8 @@ def finish(rec: UnitRecord, out: dict[str, Any], opts: Options) -> UnitRecord:
         setattr(rec, name, value)
     rec.extra["received"] = time.time()
     _write_part(opts.parts, rec)
+    if opts.parts is not None:  # the part file holds the result: the unit's checkpoints go
+        shutil.rmtree(opts.parts / f"{rec.key}.scratch", ignore_errors=True)
     if opts.progress is not None:
         opts.progress.done(rec.key)
     return rec

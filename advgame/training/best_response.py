@@ -9,7 +9,9 @@ writes the files where the run keeps them. `advgame.workflows.psro` builds these
 
 from __future__ import annotations
 
+import json
 import logging
+import shutil
 import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -18,8 +20,11 @@ from typing import Any
 
 import numpy as np
 
+from advgame.core.config import write_atomic
+from advgame.core.files import read_json
 from advgame.core.policy import WhiteBox, WhiteBoxForwarder, as_policy
-from advgame.errors import ConfigError
+from advgame.core.scratch import scratch
+from advgame.errors import ConfigError, FileFormatError
 
 __all__ = [
     "BestResponseJob",
@@ -34,6 +39,12 @@ log = logging.getLogger(__name__)
 _CHUNKS = 4
 """A learner behind a normalizer trains in this many chunks, its normalized-space budgets
 given the normalizer's current std before each (as the alternation loop does per phase)."""
+
+_SAVES = 16
+"""A resumable best response saves its learner about this many times (`train_best_response`)."""
+
+_STATE = "state.json"
+"""The file in a best response's scratch folder naming its last whole save and its steps."""
 
 
 class MixturePolicy:
@@ -194,16 +205,68 @@ def best_response_side(
     return side, rescale, _CHUNKS if chunked else 1
 
 
+def _saved(folder: Path | None) -> tuple[Path | None, int]:
+    """The last whole save in a scratch `folder` and the job's steps it holds ((None, 0): none)."""
+    state = folder / _STATE if folder is not None else None
+    if state is None or not state.exists():
+        return None, 0
+    fix = f"Delete {state.parent}: the job then trains from its first step."
+    data = read_json(state, "best-response save", fix, dict)
+    if data.get("slot") not in ("a", "b") or not isinstance(data.get("steps"), int):
+        raise FileFormatError(
+            f"{state} should name a slot and steps, got {data!r}. {fix}", path=str(state)
+        )
+    return state.parent / data["slot"], data["steps"]
+
+
+def _save(side: Any, folder: Path, done: int) -> None:
+    """Save `side` into the slot the state file does not name, then name it (a kill: either)."""
+    last, _ = _saved(folder)
+    slot = folder / ("b" if last is not None and last.name == "a" else "a")
+    shutil.rmtree(slot, ignore_errors=True)
+    side.save(slot)
+    write_atomic(folder / _STATE, json.dumps({"slot": slot.name, "steps": done}) + "\n")
+
+
+def _save_every(side: Any, steps: int) -> int | None:
+    """Steps between saves: a whole number of rollouts near ``steps / _SAVES`` (None: no saves).
+
+    On-policy learners only: the same rollouts and updates as one ``learn`` call, and nothing
+    but the model and normalizer to save (an off-policy learner's replay buffer is the run).
+    """
+    n_steps = getattr(side.model, "n_steps", None)
+    if not isinstance(n_steps, int):
+        return None
+    rollout = n_steps * int(side.model.n_envs)
+    return max(rollout, steps // _SAVES // rollout * rollout)
+
+
 def train_best_response(job: BestResponseJob) -> dict[str, Any]:
-    """Train the job's learner; return ``{"files": {name: bytes}, "model", "normalizer", "algo"}``."""
-    side, rescale, chunks = best_response_side(job)
+    """Train the job's learner; return ``{"files": {name: bytes}, "model", "normalizer", "algo"}``.
+
+    Where the runner gives the job a scratch folder (`advgame.core.scratch`: a run that keeps
+    part files, on the local executor), an on-policy learner is saved there about `_SAVES`
+    times, at rollout boundaries (so the updates are those of one uninterrupted ``learn``), and
+    a job run again after an interruption goes on from its last save.
+    """
+    folder = scratch()
+    slot, done = _saved(folder)
+    side, rescale, chunks = best_response_side(job, slot)
+    if slot is not None:
+        log.info("best response %s: going on from its save at %d steps", job.name, done)
     try:
-        done = 0
+        every = _save_every(side, job.steps) if folder is not None else None
         for k in range(chunks):
+            end = job.steps * (k + 1) // chunks
+            if done >= end:
+                continue
             rescale()
-            part = job.steps * (k + 1) // chunks - done
-            side.learn(part)
-            done += part
+            while done < end:
+                part = end - done if every is None else min(every, end - done)
+                side.learn(part)
+                done += part
+                if folder is not None and every is not None and done < job.steps:
+                    _save(side, folder, done)
         with tempfile.TemporaryDirectory(prefix="advgame-br-") as tmp:
             spec = side.save(Path(tmp))
             files = {p.name: p.read_bytes() for p in Path(tmp).iterdir() if p.is_file()}

@@ -252,7 +252,8 @@ def _search(
     shown = _CandidateProgress(units, scenario, progress)
     try:
         records = run_units(train_best_response, units, executor=kind, workers=search.workers,
-                            parts_dir=out / "optimal" / "parts", progress=shown)  # fmt: skip
+                            parts_dir=out / "optimal" / "parts", progress=shown,
+                            scratch=True)  # fmt: skip
     finally:
         shown.bar.close()
     by_index: dict[str, dict[int, Any]] = {}
