@@ -174,6 +174,48 @@ def test_optimal_grid_overrides_reach_the_search_and_bad_ones_are_refused(
             load_campaign(path)
 
 
+def test_status_counts_the_optimal_attacks_candidates_by_their_part_files(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--status`` says how much of the search is trained: its candidates, as the search keys
+    them (one trained here through the runner, as the evaluate stage trains it)."""
+    from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch, candidate_jobs
+    from advgame.evaluation.table.protagonists import run_protagonist
+    from advgame.runner.run import run_units
+    from advgame.training.best_response import train_best_response
+    from advgame.workflows.campaign import search_status
+    from advgame.workflows.suite import observation_agent
+
+    spec = tmp_path / "c.toml"
+    spec.write_text(
+        'scenario = "Hopper-v5"\nmethods = ["ppo"]\nseeds = [0]\n[train]\niterations = 1\n'
+        "protagonist_steps = 64\neval_episodes = 0\nprotagonist_hparams = { n_steps = 64 }\n"
+        '[evaluate]\nthreat = "atla"\nexploitability = 64\n'
+    )
+    campaign, out = load_campaign(spec), tmp_path / "c"
+    assert search_status(campaign, out) == {
+        "trained": 0, "candidates": 0, "trained_steps": 0, "steps": 0,
+    }  # fmt: skip
+    assert main(["campaign", str(spec), "--workers", "1", "--no-progress", "--stage", "train"]) == 0
+    offered = [g for g in OPTIMAL_GRID if g.get("victims", "all") == "all"]
+    steps = sum(64 * g.get("steps_scale", 1) for g in offered)
+    assert search_status(campaign, out) == {
+        "trained": 0, "candidates": len(offered), "trained_steps": 0, "steps": steps,
+    }  # fmt: skip
+    search = OptimalSearch(steps=64, grid=OPTIMAL_GRID)
+    protagonists = {"ppo-s0": run_protagonist(run_dir(out, "ppo-s0"))[1]}
+    agent = observation_agent("Hopper-v5", "atla")
+    (first, *_) = candidate_jobs("Hopper-v5", "atla", agent, protagonists, search)
+    parts = out / "results" / "optimal" / "parts"
+    run_units(train_best_response, [first[2]], parts_dir=parts)
+    assert search_status(campaign, out) == {
+        "trained": 1, "candidates": len(offered), "trained_steps": first[2].steps, "steps": steps,
+    }  # fmt: skip
+    assert main(["campaign", str(spec), "--status"]) == 0
+    words = f"optimal attack (finished runs): 1/{len(offered)} candidates trained"
+    assert words in capsys.readouterr().out
+
+
 def test_a_variant_trains_as_its_method_with_its_own_fields(tmp_path: Path) -> None:
     path = tmp_path / "variants.toml"
     path.write_text(

@@ -38,7 +38,12 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
 
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
-    from advgame.workflows.campaign import load_campaign, run_campaign, write_status
+    from advgame.workflows.campaign import (
+        load_campaign,
+        run_campaign,
+        search_status,
+        write_status,
+    )
 
     campaign = load_campaign(args.file)
     out = Path(args.out) if args.out else Path(args.file).with_suffix("")
@@ -50,6 +55,13 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         for run, s in status["runs"].items():
             print(f"{run}: {s['state']} ({s['iteration']}/{s['of']})")
         print(f"evaluated: {', '.join(status['evaluated']) or 'none'}; table: {status['table']}")
+        search = search_status(campaign, out)
+        if search is not None:
+            print(
+                f"optimal attack (finished runs): {search['trained']}/{search['candidates']} "
+                f"candidates trained, {search['trained_steps']:,}/{search['steps']:,} "
+                "adversary steps"
+            )
         return 0
     path = run_campaign(
         campaign, out, workers=args.workers, executor=args.executor, address=args.address,

@@ -57,7 +57,7 @@ from advgame.errors import ConfigError
 from advgame.reports.campaign import campaign_table
 from advgame.workflows.campaign_grid import Campaign, load_campaign
 
-__all__ = ["Campaign", "campaign_table", "load_campaign", "run_campaign"]
+__all__ = ["Campaign", "campaign_table", "load_campaign", "run_campaign", "search_status"]
 
 log = logging.getLogger(__name__)
 
@@ -263,6 +263,41 @@ def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) ->
     }
     write_atomic(out / "status.json", json.dumps(status, indent=2) + "\n")
     return status
+
+
+def search_status(campaign: Campaign, out: Path) -> dict[str, int] | None:
+    """How far the optimal attack's search has come for the finished runs (None: no search).
+
+    ``{"trained", "candidates", "trained_steps", "steps"}``: candidates whose part file exists
+    (`advgame.evaluation.attacks.optimal.candidate_jobs`), and their adversary steps, out of
+    all; what is left is what the evaluate stage still trains. Paths are `run_dir`'s, as the
+    evaluate stage gives them: call it with the same `out` from the same folder.
+    """
+    if not campaign.exploitability:
+        return None
+    from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch, candidate_jobs
+    from advgame.evaluation.table.columns import default_threat
+    from advgame.evaluation.table.protagonists import run_protagonist
+    from advgame.runner.units import unit_key
+    from advgame.workflows.suite import observation_agent
+
+    done = [
+        r for r in campaign.runs() if _progress(run_dir(out, r)) >= campaign.config(r).iterations
+    ]
+    threat = campaign.threat or default_threat(campaign.scenario)
+    protagonists = {r: run_protagonist(run_dir(out, r))[1] for r in done}
+    grid = campaign.search_grid() or OPTIMAL_GRID
+    search = OptimalSearch(steps=campaign.exploitability, grid=tuple(grid))
+    agent = observation_agent(campaign.scenario, threat)
+    jobs = [j for _, _, j in candidate_jobs(campaign.scenario, threat, agent, protagonists, search)]
+    parts = out / "results" / "optimal" / "parts"
+    have = [(parts / f"{unit_key(j)}.pkl").is_file() for j in jobs]
+    return {
+        "trained": sum(have),
+        "candidates": len(jobs),
+        "trained_steps": sum(j.steps for j, h in zip(jobs, have, strict=True) if h),
+        "steps": sum(j.steps for j in jobs),
+    }
 
 
 def _evaluated(out: Path) -> set[str]:

@@ -30,6 +30,7 @@ __all__ = [
     "OPTIMAL_GRID",
     "SB3_RECIPE",
     "OptimalSearch",
+    "candidate_jobs",
     "optimal_jobs",
     "released_jobs",
     "write_exploitability",
@@ -209,6 +210,42 @@ def released_jobs(
     ]
 
 
+def candidate_jobs(
+    scenario: str,
+    threat: str,
+    agent: str,
+    protagonists: Mapping[str, Any],
+    search: OptimalSearch,
+) -> list[tuple[str, int, Any]]:
+    """Every candidate the search trains: ``(protagonist, grid index, BestResponseJob)``.
+
+    In training order, the long ones first. A candidate whose part file
+    (``<out>/optimal/parts/<unit_key(job)>.pkl``) exists is read back, not trained.
+    """
+    from advgame.core.registry import make
+    from advgame.training.best_response import BestResponseJob, MixtureSpec
+
+    game = make(scenario, preset=threat)
+    ids = game.protagonists
+    game.close()
+    found = []
+    for name, spec in protagonists.items():
+        specs = dict(spec) if isinstance(spec, Mapping) else dict.fromkeys(ids, spec)
+        opponents = {a: MixtureSpec((s,), (1.0,)) for a, s in specs.items()}
+        for k, entry in enumerate(search.grid):
+            if not _applies(entry, spec):
+                continue
+            hparams = {key: v for key, v in entry.items() if key not in SEARCH_KEYS[1:]}
+            job = BestResponseJob(
+                name=f"{name}/{k}", scenario=scenario, make_kwargs={"preset": threat},
+                agent=agent, algo=entry.get("algo", "ppo"), hparams=hparams,
+                opponents=opponents, seed=search.seed + k,
+                steps=search.steps * int(entry.get("steps_scale", 1)),
+            )  # fmt: skip
+            found.append((name, k, job))
+    return sorted(found, key=lambda f: -f[2].steps)  # stable: grid order among equals
+
+
 def _search(
     scenario: str,
     threat: str,
@@ -220,33 +257,12 @@ def _search(
 ) -> dict[str, _Found]:
     """Train every candidate as executor jobs, write their files, keep each row's strongest."""
     from advgame.agents.checkpoint import SB3Checkpoint
-    from advgame.core.registry import make
     from advgame.evaluation.table.running import _DEFAULT_EXECUTOR, evaluate
     from advgame.runner.run import run_units
-    from advgame.training.best_response import BestResponseJob, MixtureSpec, train_best_response
+    from advgame.training.best_response import train_best_response
 
-    game = make(scenario, preset=threat)
-    ids = game.protagonists
-    game.close()
-    units, where = [], []
-    for name, spec in protagonists.items():
-        specs = dict(spec) if isinstance(spec, Mapping) else dict.fromkeys(ids, spec)
-        opponents = {a: MixtureSpec((s,), (1.0,)) for a, s in specs.items()}
-        for k, entry in enumerate(search.grid):
-            if not _applies(entry, spec):
-                continue
-            hparams = {key: v for key, v in entry.items() if key not in SEARCH_KEYS[1:]}
-            units.append(
-                BestResponseJob(
-                    name=f"{name}/{k}", scenario=scenario, make_kwargs={"preset": threat},
-                    agent=agent, algo=entry.get("algo", "ppo"), hparams=hparams,
-                    opponents=opponents, seed=search.seed + k,
-                    steps=search.steps * int(entry.get("steps_scale", 1)),
-                )
-            )  # fmt: skip
-            where.append((name, k))
-    order = sorted(range(len(units)), key=lambda i: -units[i].steps)  # the long ones first
-    units, where = [units[i] for i in order], [where[i] for i in order]
+    found_jobs = candidate_jobs(scenario, threat, agent, protagonists, search)
+    units, where = [j for _, _, j in found_jobs], [(n, k) for n, k, _ in found_jobs]
     kind = search.executor or _DEFAULT_EXECUTOR[0]
     log.info("optimal attack: %d candidates of %d steps", len(units), search.steps)
     shown = _CandidateProgress(units, scenario, progress)
