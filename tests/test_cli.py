@@ -189,6 +189,15 @@ def test_evaluate_writes_the_report_and_its_data(evaluated: Path, cli_run: Path)
     assert "heatmap.png" in report and "budget.png" in report and cli_run.name in report
 
 
+def test_evaluate_logs_progress_unless_told_not_to(cli_run: Path, tmp_path: Path, capsys) -> None:
+    args = ["evaluate", str(cli_run), "--seeds", "1", "--workers", "1", "--budgets"]
+    args += ["--adversaries", "nominal"]
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    assert "evaluate: " in capsys.readouterr().err  # stderr is not a terminal here: lines
+    assert main([*args, "--out", str(tmp_path / "b"), "--no-progress"]) == 0
+    assert "evaluate: " not in capsys.readouterr().err
+
+
 def test_report_rebuilds_the_report_from_the_data(evaluated: Path, capsys) -> None:
     payoff = (evaluated / "payoff.csv").read_text()
     report = (evaluated / "report.md").read_text()

@@ -54,6 +54,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         threat=threat,
         released=released,
         released_adversaries=own,
+        progress=not args.no_progress,
     )
     print(f"report: {out}")
     return 0
@@ -137,6 +138,7 @@ def evaluate_parser(sub: Any) -> None:
     p.add_argument("--seeds", type=int, default=3, help="evaluation seeds per cell (default 3)")
     p.add_argument("--episodes", type=int, default=1, help="episodes per seed (default 1)")
     executor_arguments(p, workers=2)
+    p.add_argument("--no-progress", action="store_true", help="no progress bars or log lines")
     p.add_argument(
         "--exploitability",
         type=int,
