@@ -68,6 +68,24 @@ def test_list_presets_shows_each_preset_with_its_description(capsys) -> None:
     assert out.splitlines()[0].startswith("Hopper-v5")
 
 
+def test_robosuites_per_env_info_lines_are_shown_only_with_verbose(capsys) -> None:
+    import logging
+
+    logger = logging.getLogger("robosuite_logs")
+
+    def record(level: int) -> logging.LogRecord:
+        return logger.makeRecord(
+            logger.name, level, __file__, 1, "Loading controller ...", (), None
+        )
+
+    assert main(["list"]) == 0
+    assert not logger.filter(record(logging.INFO)) and logger.filter(record(logging.WARNING))
+    logger.filters.clear()  # as a -v run finds it
+    assert main(["-v", "list"]) == 0
+    assert logger.filter(record(logging.INFO))
+    capsys.readouterr()
+
+
 def test_an_unknown_scenario_exits_2_with_a_suggestion(capsys, tmp_path: Path) -> None:
     assert main(["list", "Hoper-v5"]) == 2
     err = capsys.readouterr().err

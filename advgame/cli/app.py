@@ -260,6 +260,28 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_CHATTY = ("robosuite_logs",)
+"""Loggers of libraries that log at INFO on every env they build (robosuite: "Loading
+controller configuration from ...", twice per env, once through its own handler and once
+through the root's), shown only with ``-v``."""
+
+
+def _below_warning(record: logging.LogRecord) -> bool:
+    return record.levelno >= logging.WARNING
+
+
+def _quiet_libraries() -> None:
+    """Drop the `_CHATTY` loggers' records below WARNING.
+
+    A filter on the logger itself, so it holds whatever level the library sets when it is
+    imported later.
+    """
+    for name in _CHATTY:
+        logger = logging.getLogger(name)
+        if _below_warning not in logger.filters:
+            logger.addFilter(_below_warning)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``advgame`` command; returns the exit status.
 
@@ -273,6 +295,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    if not args.verbose:
+        _quiet_libraries()
     try:
         return int(args.func(args))
     except AdvgameError as exc:
