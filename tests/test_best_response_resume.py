@@ -114,6 +114,9 @@ def test_a_stopped_job_goes_on_from_its_last_save_and_its_folder_goes_with_its_p
     (record,) = run_units(train_best_response, [job], parts_dir=parts, max_retries=0, scratch=True)
     assert sum(learned) == job.steps - first  # from the save after piece seven
     assert not list(parts.glob("*.scratch"))  # the part file holds the result now
+    (parts / f"{record.key}.scratch" / "a").mkdir(parents=True)  # a kill right after the part
+    run_units(train_best_response, [job], parts_dir=parts, max_retries=0, scratch=True)
+    assert not list(parts.glob("*.scratch"))  # read back, its stale folder removed
     assert (parts / f"{record.key}.pkl").is_file()
     from stable_baselines3 import PPO
 

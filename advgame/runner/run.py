@@ -33,6 +33,7 @@ What every executor guarantees:
 from __future__ import annotations
 
 import logging
+import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -156,6 +157,8 @@ def run_units(
     for i, r in enumerate(records):
         if r is not None:
             ticks.done(keys[i], before=True)
+            if parts is not None:  # a kill between its part file and its folder's removal
+                shutil.rmtree(parts / f"{keys[i]}.scratch", ignore_errors=True)
     ticks.started(len(todo))
     ship_files = executor == "ray" if ship_files is None else ship_files
     from advgame.runner import local as _local
