@@ -18,6 +18,7 @@ import pytest
 import torch
 
 from advgame.agents.checkpoint import SB3Checkpoint
+from advgame.core.progress import listening
 from advgame.core.scratch import scratch_folder
 from advgame.runner.run import JobFailedError, run_units
 from advgame.training import best_response
@@ -71,12 +72,15 @@ def test_saving_along_the_way_changes_no_weight(
         real(side, folder, done)
 
     best_response._save = counted  # type: ignore[assignment]
+    reports: list[int] = []
     try:
-        with scratch_folder(tmp_path / "scratch"):
+        with scratch_folder(tmp_path / "scratch"), listening(reports.append):
             saved = train_best_response(job)
     finally:
         best_response._save = real  # type: ignore[assignment]
     assert len(saves) >= 10 and saves == sorted(saves) and saves[-1] < job.steps
+    # each piece is reported as it is trained (a bar counting steps moves inside the job)
+    assert sum(reports) == job.steps and len(reports) == len(saves) + 1
     a, b = _weights(plain), _weights(saved)
     assert a.keys() == b.keys()
     assert all(torch.equal(a[k], b[k]) for k in a)

@@ -159,3 +159,33 @@ def test_a_training_run_logs_a_line_per_iteration(
     # a resumed run counts what was done before (nothing left here: no iteration line)
     resume(tmp_path / "run", progress=False)
     assert "train InvertedPendulum-v5" not in capsys.readouterr().err
+
+
+def test_the_search_counts_a_candidates_reported_steps_once() -> None:
+    """A candidate trained here reports its pieces; its end adds only what was not reported
+    (all of it from a pool worker, the steps before its save for a resumed one)."""
+    from types import SimpleNamespace
+
+    from advgame.core.progress import listening, report
+    from advgame.evaluation.attacks.optimal import _CandidateProgress
+
+    counted: list[tuple[str, int]] = []
+    bar = SimpleNamespace(
+        update=lambda n: counted.append(("update", n)),
+        skip=lambda n: counted.append(("skip", n)),
+        set_postfix_str=lambda text, refresh=True: None,
+        close=lambda: None,
+    )
+    units = [SimpleNamespace(steps=s, name=f"a/{i}") for i, s in enumerate((100, 50, 80))]
+    shown = _CandidateProgress(units, "X", False)
+    shown.bar = bar
+    shown.unit_done(1, True)  # read back
+    with listening(shown.step):
+        report(30)
+        report(30)
+        shown.unit_done(0, False)
+        report(20)  # a resumed candidate: 60 of its 80 steps were trained before its save
+        shown.unit_done(2, False)
+    report(99)  # no one listens any more
+    assert sum(n for kind, n in counted if kind == "update") == 100 + 80
+    assert counted[0] == ("skip", 50)

@@ -15,9 +15,11 @@ from __future__ import annotations
 import sys
 import time
 from collections import deque
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import IO, Any
 
-__all__ = ["WINDOW", "LineProgress", "Silent", "progress"]
+__all__ = ["WINDOW", "LineProgress", "Silent", "listening", "progress", "report"]
 
 WINDOW = 10
 """Lines over which `LineProgress` measures the rate behind its estimate of the time left."""
@@ -181,3 +183,37 @@ def progress(
         mininterval=1.0,
         file=out,
     )
+
+
+_LISTENERS: list[Callable[[int], None]] = []
+
+
+def report(n: int) -> None:
+    """Tell this process's listeners that the running job has done `n` more of its units.
+
+    A long job (a best response: its steps) reports as it goes, so that a bar counting such
+    jobs moves inside one of them. Nothing listens in a pool worker, whose driver counts the
+    job when it ends: reporting costs nothing where no one listens.
+    """
+    for listener in list(_LISTENERS):
+        listener(n)
+
+
+@contextmanager
+def listening(listener: Callable[[int], None]) -> Iterator[None]:
+    """Call `listener(n)` for every `report` made inside (jobs run in this process).
+
+    Example:
+        >>> seen = []
+        >>> with listening(seen.append):
+        ...     report(3)
+        >>> report(4)
+        >>> seen
+        [3]
+
+    """
+    _LISTENERS.append(listener)
+    try:
+        yield
+    finally:
+        _LISTENERS.remove(listener)

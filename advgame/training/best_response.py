@@ -23,6 +23,7 @@ import numpy as np
 from advgame.core.config import write_atomic
 from advgame.core.files import read_json
 from advgame.core.policy import WhiteBox, WhiteBoxForwarder, as_policy
+from advgame.core.progress import report
 from advgame.core.scratch import scratch
 from advgame.errors import ConfigError, FileFormatError
 
@@ -265,6 +266,7 @@ def train_best_response(job: BestResponseJob) -> dict[str, Any]:
                 part = end - done if every is None else min(every, end - done)
                 side.learn(part)
                 done += part
+                report(part)  # a bar counting steps moves inside the job (in this process)
                 if folder is not None and every is not None and done < job.steps:
                     _save(side, folder, done)
         with tempfile.TemporaryDirectory(prefix="advgame-br-") as tmp:

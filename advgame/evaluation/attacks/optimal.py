@@ -257,6 +257,7 @@ def _search(
 ) -> dict[str, _Found]:
     """Train every candidate as executor jobs, write their files, keep each row's strongest."""
     from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.core.progress import listening
     from advgame.evaluation.table.running import _DEFAULT_EXECUTOR, evaluate
     from advgame.runner.run import run_units
     from advgame.training.best_response import train_best_response
@@ -267,9 +268,10 @@ def _search(
     log.info("optimal attack: %d candidates of %d steps", len(units), search.steps)
     shown = _CandidateProgress(units, scenario, progress)
     try:
-        records = run_units(train_best_response, units, executor=kind, workers=search.workers,
-                            parts_dir=out / "optimal" / "parts", progress=shown,
-                            scratch=True)  # fmt: skip
+        with listening(shown.step):  # candidates trained in this process report their pieces
+            records = run_units(train_best_response, units, executor=kind,
+                                workers=search.workers, parts_dir=out / "optimal" / "parts",
+                                progress=shown, scratch=True)  # fmt: skip
     finally:
         shown.bar.close()
     by_index: dict[str, dict[int, Any]] = {}
@@ -313,6 +315,8 @@ class _CandidateProgress:
 
         self.units = units
         self.trained = 0
+        self.partial = 0
+        """Steps the running candidate has reported (`step`), counted before it ends."""
         total = sum(u.steps for u in units)
         self.bar = progress(total, f"optimal attack {scenario}", unit="step", show=show)
 
@@ -320,6 +324,11 @@ class _CandidateProgress:
         """`count` candidates start training (the others were read back)."""
         read = len(self.units) - count
         self.bar.set_postfix_str(f"{count} candidates to train, {read} read back")
+
+    def step(self, n: int) -> None:
+        """The candidate training in this process did `n` more steps (a line every 5 min)."""
+        self.partial += n
+        self.bar.update(n)
 
     def unit_done(self, index: int, before: bool) -> None:
         """Candidate `index` finished (`before`: read back from its part file)."""
@@ -332,7 +341,8 @@ class _CandidateProgress:
             f"candidate {unit.name} trained ({unit.steps:,} steps; {self.trained} this run)",
             refresh=False,
         )
-        self.bar.update(unit.steps)
+        self.bar.update(max(unit.steps - self.partial, 0))  # a resumed one: its earlier steps
+        self.partial = 0
 
 
 def write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:
