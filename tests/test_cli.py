@@ -214,6 +214,8 @@ def test_evaluate_logs_progress_unless_told_not_to(cli_run: Path, tmp_path: Path
     assert "evaluate: " in capsys.readouterr().err  # stderr is not a terminal here: lines
     assert main([*args, "--out", str(tmp_path / "b"), "--no-progress"]) == 0
     assert "evaluate: " not in capsys.readouterr().err
+    assert main([*args, "--out", str(tmp_path / "c"), "--exploitability", "-5"]) == 2
+    assert ">= 0 (0: no search); got -5" in capsys.readouterr().err
 
 
 def test_report_rebuilds_the_report_from_the_data(evaluated: Path, capsys) -> None:

@@ -27,8 +27,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    from advgame.errors import ConfigError
     from advgame.workflows import zoo
     from advgame.workflows.suite import BUDGETS, evaluate_runs
+
+    if args.exploitability < 0:
+        raise ConfigError(
+            f"--exploitability is the optimal attack's steps per candidate, >= 0 (0: no "
+            f"search); got {args.exploitability}."
+        )
 
     released, own, threat = zoo.evaluation_inputs(
         args.zoo or [], adversaries=args.zoo_adversaries, threat=args.threat
