@@ -111,6 +111,9 @@ def test_bad_campaign_files_are_clear_errors(tmp_path: Path) -> None:
             "-s<digits>",
         ),
         ('methods = ["ppo", "ppo"]\nscenario = "Hopper-v5"', "distinct"),
+        ('methods = ["ppo"]\nscenario = "Hopper-v5"\nseeds = 3', "list of distinct ints"),
+        ('methods = ["ppo"]\nscenario = "Hopper-v5"\n[train.ppo]\nseeds = [1, 1]', "train.ppo"),
+        ('methods = ["ppo"]\nscenario = "Hopper-v5"\n[train.ppo]\nseeds = []', "train.ppo"),
     ]:
         bad.write_text(text)
         with pytest.raises(ConfigError, match=words):
@@ -214,6 +217,19 @@ def test_status_counts_the_optimal_attacks_candidates_by_their_part_files(
     assert main(["campaign", str(spec), "--status"]) == 0
     words = f"optimal attack (finished runs): 1/{len(offered)} candidates trained"
     assert words in capsys.readouterr().out
+
+
+def test_a_method_may_have_more_seeds_than_the_others(tmp_path: Path) -> None:
+    """Issue 36 item 4: more seeds where the intervals overlap, the other rows left alone."""
+    path = tmp_path / "more.toml"
+    path.write_text(
+        'scenario = "Hopper-v5"\nmethods = ["ppo", "atla"]\nseeds = [0, 1, 2]\n'
+        "[train.ppo]\nseeds = [0, 1, 2, 3, 4]\n"
+    )
+    campaign = load_campaign(path)
+    assert campaign.method_runs("ppo") == [f"ppo-s{s}" for s in range(5)]
+    assert campaign.method_runs("atla") == ["atla-s0", "atla-s1", "atla-s2"]
+    assert campaign.config("ppo-s4").seed == 4  # "seeds" is the grid's, not a TrainConfig field
 
 
 def test_a_variant_trains_as_its_method_with_its_own_fields(tmp_path: Path) -> None:

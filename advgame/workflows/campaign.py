@@ -14,6 +14,7 @@ the threat model, the optimal attack's budget)::
 
     [train.atla]               # and for one method
     adversary_steps = 2048
+    seeds = [0, 1, 2, 3, 4]    # (its own seeds: more where the intervals overlap)
 
 A name in ``methods`` may also be a variant of a method: its section says which method it
 varies, and the rest of the section is the variation (a training preset, hyper-parameters)::

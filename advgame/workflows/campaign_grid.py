@@ -36,12 +36,13 @@ class Campaign:
     """Names in `advgame.training.METHODS`, or variants whose `per_method` section names one
     under ``method``."""
     seeds: tuple[int, ...]
-    """Training seeds of every method."""
+    """Training seeds of every method whose section does not give its own ``seeds``."""
     train: Mapping[str, Any] = field(default_factory=dict)
     """`TrainConfig` fields for every run."""
     per_method: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     """`TrainConfig` fields for the runs of one method (over `train`); a variant's also names
-    its ``method``."""
+    its ``method``, and any section may give the method its own ``seeds`` (more seeds where
+    the intervals overlap, without training the other methods again)."""
     adversaries: tuple[str, ...] = ("attacks",)
     """Evaluation column specs."""
     threat: str | None = None
@@ -73,11 +74,23 @@ class Campaign:
                 f"Campaign method names must be distinct, lowercase letters, digits, '-', '_' "
                 f"or '.', and not end in -s<digits> (run names do), got {list(self.methods)!r}."
             )
-        if not self.seeds or not all(type(s) is int and s >= 0 for s in self.seeds):
-            raise ConfigError(f"Campaign seeds must be ints >= 0, got {list(self.seeds)!r}.")
         stray = set(self.per_method) - set(self.methods)
         if stray:
             raise ConfigError(f"[train.{sorted(stray)[0]}] names no method of the campaign.")
+        for where, seeds in [("seeds", self.seeds)] + [
+            (f"[train.{m}] seeds", own["seeds"])
+            for m, own in self.per_method.items()
+            if "seeds" in own
+        ]:
+            if (
+                not isinstance(seeds, list | tuple)
+                or not seeds
+                or not all(type(s) is int and s >= 0 for s in seeds)
+                or len(set(seeds)) != len(seeds)
+            ):
+                raise ConfigError(
+                    f"Campaign {where} must be a list of distinct ints >= 0, got {seeds!r}."
+                )
         if type(self.eval_seeds) is not int or self.eval_seeds < 1:
             raise ConfigError(f"evaluate.seeds must be an int >= 1, got {self.eval_seeds!r}.")
         if type(self.exploitability) is not int or self.exploitability < 0:
@@ -144,9 +157,13 @@ class Campaign:
         """The `advgame.training.METHODS` name `method` trains with (itself, or its variant's)."""
         return str(self.per_method.get(method, {}).get("method", method))
 
+    def method_seeds(self, method: str) -> tuple[int, ...]:
+        """The training seeds of `method`: its section's ``seeds``, else the campaign's."""
+        return tuple(self.per_method.get(method, {}).get("seeds", self.seeds))
+
     def runs(self) -> list[str]:
         """Run names, ``METHOD-sSEED``, method by method."""
-        return [f"{m}-s{s}" for m in self.methods for s in self.seeds]
+        return [f"{m}-s{s}" for m in self.methods for s in self.method_seeds(m)]
 
     def method_runs(self, method: str) -> list[str]:
         """The runs of one method (``atla`` is not ``atla-sa``)."""
@@ -157,7 +174,9 @@ class Campaign:
         from advgame.training import METHODS, TrainConfig
 
         method, _, seed = run.rpartition("-s")
-        own = {k: v for k, v in self.per_method.get(method, {}).items() if k != "method"}
+        own = {
+            k: v for k, v in self.per_method.get(method, {}).items() if k not in ("method", "seeds")
+        }
         fields = {**METHODS[self.base_method(method)], **self.train, **own}
         try:
             return TrainConfig(scenario=self.scenario, seed=int(seed), **fields)
@@ -192,7 +211,7 @@ def load_campaign(path: str | Path) -> Campaign:
     return Campaign(
         scenario=str(data.get("scenario", "")),
         methods=methods,
-        seeds=tuple(data.get("seeds", (0,))),
+        seeds=_specs(data.get("seeds", (0,))),
         train=train,
         per_method=per_method,
         adversaries=_specs(ev.get("adversaries", ("attacks",))),
@@ -205,5 +224,5 @@ def load_campaign(path: str | Path) -> Campaign:
 
 
 def _specs(value: Any) -> Any:
-    """A list of column specs as a tuple (anything else is left for the check to refuse)."""
+    """A list (column specs, seeds) as a tuple; anything else is left for the check to refuse."""
     return tuple(value) if isinstance(value, list | tuple) else value
