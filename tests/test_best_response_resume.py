@@ -90,12 +90,13 @@ class _Stop(RuntimeError):
     """The 'kill' of the test: raised from inside training."""
 
 
+@pytest.mark.parametrize("algo", ["ppo", "recurrent-ppo"])
 def test_a_stopped_job_goes_on_from_its_last_save_and_its_folder_goes_with_its_part(
-    pendulum_ppo: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    pendulum_ppo: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, algo: str
 ) -> None:
     from advgame.agents.side import Side
 
-    job, parts = _job(pendulum_ppo), tmp_path / "parts"
+    job, parts = _job(pendulum_ppo, algo=algo), tmp_path / "parts"
     learned: list[int] = []
     real_learn = Side.learn
 
@@ -122,7 +123,7 @@ def test_a_stopped_job_goes_on_from_its_last_save_and_its_folder_goes_with_its_p
     run_units(train_best_response, [job], parts_dir=parts, max_retries=0, scratch=True)
     assert not list(parts.glob("*.scratch"))  # read back, its stale folder removed
     assert (parts / f"{record.key}.pkl").is_file()
-    from stable_baselines3 import PPO
+    from advgame.agents.checkpoint import _algo_class
 
     # without scratch=True (PSRO: a resumed run is the uninterrupted one) no folder is given
     learned.clear()
@@ -131,4 +132,4 @@ def test_a_stopped_job_goes_on_from_its_last_save_and_its_folder_goes_with_its_p
     assert len(learned) == 1  # one learn call: no saves
     assert again[0].key == record.key
     zipped = io.BytesIO(record.value["files"][record.value["model"]])
-    assert PPO.load(zipped, device="cpu").num_timesteps >= job.steps
+    assert _algo_class(algo).load(zipped, device="cpu").num_timesteps >= job.steps
