@@ -262,8 +262,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 _CHATTY = ("robosuite_logs",)
 """Loggers of libraries that log at INFO on every env they build (robosuite: "Loading
-controller configuration from ...", twice per env, once through its own handler and once
-through the root's), shown only with ``-v``."""
+controller configuration from ..."), shown only with ``-v``; they print through a console
+handler of their own, so they do not pass their records on to the root's as well (which
+printed each line twice)."""
 
 
 def _below_warning(record: logging.LogRecord) -> bool:
@@ -295,6 +296,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    for name in _CHATTY:
+        logging.getLogger(name).propagate = False  # their own handler prints them
     if not args.verbose:
         _quiet_libraries()
     try:
