@@ -87,6 +87,30 @@ def test_robosuites_per_env_info_lines_are_shown_only_with_verbose(capsys) -> No
     capsys.readouterr()
 
 
+def _robosuite_logger_state(_: int) -> tuple[bool, bool]:
+    """In a worker: (propagates, lets INFO through) for robosuite's logger."""
+    import logging
+
+    logger = logging.getLogger("robosuite_logs")
+    info = logger.makeRecord(logger.name, logging.INFO, __file__, 1, "Loading ...", (), None)
+    return logger.propagate, bool(logger.filter(info))
+
+
+def test_pool_workers_quiet_robosuite_as_the_command_line_did() -> None:
+    """Most envs of an evaluation are built in pool workers: they follow the command line."""
+    from advgame.core.library_logs import quiet_libraries
+    from advgame.runner import local
+    from advgame.runner.run import run_units
+
+    try:
+        quiet_libraries(True)
+        local.shutdown()  # fresh workers, started with this process's environment
+        records = run_units(_robosuite_logger_state, [0, 1], workers=2, start_method="spawn")
+        assert [r.value for r in records] == [(False, False)] * 2  # without it: (True, True)
+    finally:
+        local.shutdown()
+
+
 def test_an_unknown_scenario_exits_2_with_a_suggestion(capsys, tmp_path: Path) -> None:
     assert main(["list", "Hoper-v5"]) == 2
     err = capsys.readouterr().err

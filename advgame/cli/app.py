@@ -15,6 +15,7 @@ from typing import Any
 
 from advgame.cli.campaign import campaign_parser, zoo_parser
 from advgame.cli.evaluate import evaluate_parser, executor_arguments
+from advgame.core.library_logs import quiet_libraries
 from advgame.errors import AdvgameError, ConfigError
 
 __all__ = ["main"]
@@ -260,29 +261,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-_CHATTY = ("robosuite_logs",)
-"""Loggers of libraries that log at INFO on every env they build (robosuite: "Loading
-controller configuration from ..."), shown only with ``-v``; they print through a console
-handler of their own, so they do not pass their records on to the root's as well (which
-printed each line twice)."""
-
-
-def _below_warning(record: logging.LogRecord) -> bool:
-    return record.levelno >= logging.WARNING
-
-
-def _quiet_libraries() -> None:
-    """Drop the `_CHATTY` loggers' records below WARNING.
-
-    A filter on the logger itself, so it holds whatever level the library sets when it is
-    imported later.
-    """
-    for name in _CHATTY:
-        logger = logging.getLogger(name)
-        if _below_warning not in logger.filters:
-            logger.addFilter(_below_warning)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``advgame`` command; returns the exit status.
 
@@ -296,10 +274,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
-    for name in _CHATTY:
-        logging.getLogger(name).propagate = False  # their own handler prints them
-    if not args.verbose:
-        _quiet_libraries()
+    quiet_libraries(not args.verbose)  # robosuite's line per env: only with -v, and once
     try:
         return int(args.func(args))
     except AdvgameError as exc:

@@ -168,11 +168,14 @@ def init_worker(path: list[str]) -> None:
     """Worker initializer: the caller's import path; one thread for torch, BLAS and MuJoCo.
 
     A pool already runs one worker per core, so batched simulator steps stay on the worker's
-    thread unless the user set `advgame.core.physics.THREADS_VAR` themselves.
+    thread unless the user set `advgame.core.physics.THREADS_VAR` themselves. Libraries' log
+    lines are quieted as the command line quieted them (`advgame.core.library_logs`).
     """
+    from advgame.core.library_logs import quiet_from_environment
     from advgame.core.physics import THREADS_VAR
 
     sys.path[:] = path
+    quiet_from_environment()  # the command line's -v or not, for the envs built here
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"  # read by torch and BLAS when (and if) a job imports them
     os.environ.setdefault(THREADS_VAR, "1")

@@ -235,10 +235,11 @@ def _save_every(side: Any, steps: int) -> int | None:
     On-policy learners only: the same rollouts and updates as one ``learn`` call, and nothing
     but the model and normalizer to save (an off-policy learner's replay buffer is the run).
     """
-    n_steps = getattr(side.model, "n_steps", None)
-    if not isinstance(n_steps, int):
+    from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+
+    if not isinstance(side.model, OnPolicyAlgorithm):  # off-policy ones have n_steps too (n-step)
         return None
-    rollout = n_steps * int(side.model.n_envs)
+    rollout = int(side.model.n_steps) * int(side.model.n_envs)
     return max(rollout, steps // _SAVES // rollout * rollout)
 
 
