@@ -133,3 +133,17 @@ def test_a_stopped_job_goes_on_from_its_last_save_and_its_folder_goes_with_its_p
     assert again[0].key == record.key
     zipped = io.BytesIO(record.value["files"][record.value["model"]])
     assert _algo_class(algo).load(zipped, device="cpu").num_timesteps >= job.steps
+
+
+def test_a_save_that_no_longer_loads_is_dropped_and_the_job_starts_over(
+    pendulum_ppo: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    job, folder = _job(pendulum_ppo), tmp_path / "scratch"
+    (folder / "a").mkdir(parents=True)  # the state names a slot whose files are gone
+    (folder / "state.json").write_text('{"slot": "a", "steps": 640}\n')
+    reports: list[int] = []
+    with scratch_folder(folder), listening(reports.append):
+        result = train_best_response(job)
+    assert sum(reports) == job.steps  # every step trained here, none taken from the save
+    assert "does not load" in caplog.text
+    assert result["model"]

@@ -253,7 +253,18 @@ def train_best_response(job: BestResponseJob) -> dict[str, Any]:
     """
     folder = scratch()
     slot, done = _saved(folder)
-    side, rescale, chunks = best_response_side(job, slot)
+    try:
+        side, rescale, chunks = best_response_side(job, slot)
+    except Exception as exc:
+        if slot is None or folder is None:
+            raise
+        # a save that no longer loads (its files removed, written by another version): start
+        # over rather than fail every retry on the same save
+        log.warning("best response %s: its save in %s does not load (%s: %s); training from "
+                    "the start", job.name, folder, type(exc).__name__, exc)  # fmt: skip
+        shutil.rmtree(folder, ignore_errors=True)
+        slot, done = None, 0
+        side, rescale, chunks = best_response_side(job)
     if slot is not None:
         log.info("best response %s: going on from its save at %d steps", job.name, done)
     try:
