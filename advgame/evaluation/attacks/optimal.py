@@ -341,7 +341,11 @@ class _CandidateProgress:
             f"candidate {unit.name} trained ({unit.steps:,} steps; {self.trained} this run)",
             refresh=False,
         )
-        self.bar.update(max(unit.steps - self.partial, 0))  # a resumed one: its earlier steps
+        rest = max(unit.steps - self.partial, 0)  # all of it from a pool worker (no reports)
+        if self.partial and rest:  # resumed: the steps before its save are not this run's rate
+            getattr(self.bar, "skip", self.bar.update)(rest)
+            rest = 0
+        self.bar.update(rest)  # writes the milestone's line
         self.partial = 0
 
 
