@@ -186,7 +186,7 @@ def test_status_counts_the_optimal_attacks_candidates_by_their_part_files(
     from advgame.evaluation.table.protagonists import run_protagonist
     from advgame.runner.run import run_units
     from advgame.training.best_response import train_best_response
-    from advgame.workflows.campaign import search_status
+    from advgame.workflows.campaign import done_runs, search_status, write_status
     from advgame.workflows.suite import observation_agent
 
     spec = tmp_path / "c.toml"
@@ -196,13 +196,18 @@ def test_status_counts_the_optimal_attacks_candidates_by_their_part_files(
         '[evaluate]\nthreat = "atla"\nexploitability = 64\n'
     )
     campaign, out = load_campaign(spec), tmp_path / "c"
-    assert search_status(campaign, out) == {
+
+    def counted() -> dict[str, int] | None:  # as --status counts: the finished runs' candidates
+        out.mkdir(parents=True, exist_ok=True)
+        return search_status(campaign, out, done_runs(write_status(campaign, out)))
+
+    assert counted() == {
         "trained": 0, "candidates": 0, "trained_steps": 0, "steps": 0,
     }  # fmt: skip
     assert main(["campaign", str(spec), "--workers", "1", "--no-progress", "--stage", "train"]) == 0
     offered = [g for g in OPTIMAL_GRID if g.get("victims", "all") == "all"]
     steps = sum(64 * g.get("steps_scale", 1) for g in offered)
-    assert search_status(campaign, out) == {
+    assert counted() == {
         "trained": 0, "candidates": len(offered), "trained_steps": 0, "steps": steps,
     }  # fmt: skip
     search = OptimalSearch(steps=64, grid=OPTIMAL_GRID)
@@ -211,7 +216,7 @@ def test_status_counts_the_optimal_attacks_candidates_by_their_part_files(
     (first, *_) = candidate_jobs("Hopper-v5", "atla", agent, protagonists, search)
     parts = out / "results" / "optimal" / "parts"
     run_units(train_best_response, [first[2]], parts_dir=parts)
-    assert search_status(campaign, out) == {
+    assert counted() == {
         "trained": 1, "candidates": len(offered), "trained_steps": first[2].steps, "steps": steps,
     }  # fmt: skip
     assert main(["campaign", str(spec), "--status"]) == 0

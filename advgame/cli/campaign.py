@@ -39,6 +39,7 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
     from advgame.workflows.campaign import (
+        done_runs,
         load_campaign,
         run_campaign,
         search_status,
@@ -55,7 +56,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         for run, s in status["runs"].items():
             print(f"{run}: {s['state']} ({s['iteration']}/{s['of']})")
         print(f"evaluated: {', '.join(status['evaluated']) or 'none'}; table: {status['table']}")
-        search = search_status(campaign, out)
+        search = search_status(campaign, out, done_runs(status))
         if search is not None:
             print(
                 f"optimal attack (finished runs): {search['trained']}/{search['candidates']} "

@@ -33,7 +33,6 @@ What every executor guarantees:
 from __future__ import annotations
 
 import logging
-import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -45,6 +44,7 @@ from advgame.runner.units import (
     _name,
     _read_part,
     digest,
+    drop_scratch,
     first_action,
     ship,
     unit_key,
@@ -157,8 +157,7 @@ def run_units(
     for i, r in enumerate(records):
         if r is not None:
             ticks.done(keys[i], before=True)
-            if parts is not None:  # a kill between its part file and its folder's removal
-                shutil.rmtree(parts / f"{keys[i]}.scratch", ignore_errors=True)
+            drop_scratch(parts, keys[i])  # a kill between its part file and the folder's removal
     ticks.started(len(todo))
     ship_files = executor == "ray" if ship_files is None else ship_files
     from advgame.runner import local as _local

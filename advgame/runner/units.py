@@ -271,7 +271,17 @@ def scratch_dir(opts: Options, key: str) -> str | None:
     """
     if opts.parts is None or not opts.scratch:
         return None
-    return str(opts.parts / f"{key}.scratch")
+    return str(_scratch_path(opts.parts, key))
+
+
+def _scratch_path(parts: Path, key: str) -> Path:
+    return parts / f"{key}.scratch"
+
+
+def drop_scratch(parts: Path | None, key: str) -> None:
+    """Remove unit `key`'s scratch folder, if any: its part file holds the result now."""
+    if parts is not None:
+        shutil.rmtree(_scratch_path(parts, key), ignore_errors=True)
 
 
 @dataclass(frozen=True)
@@ -297,8 +307,7 @@ def finish(rec: UnitRecord, out: dict[str, Any], opts: Options) -> UnitRecord:
         setattr(rec, name, value)
     rec.extra["received"] = time.time()
     _write_part(opts.parts, rec)
-    if opts.parts is not None:  # the part file holds the result: the unit's checkpoints go
-        shutil.rmtree(opts.parts / f"{rec.key}.scratch", ignore_errors=True)
+    drop_scratch(opts.parts, rec.key)
     if opts.progress is not None:
         opts.progress.done(rec.key)
     return rec

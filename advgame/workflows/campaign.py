@@ -58,7 +58,14 @@ from advgame.errors import ConfigError
 from advgame.reports.campaign import campaign_table
 from advgame.workflows.campaign_grid import Campaign, load_campaign
 
-__all__ = ["Campaign", "campaign_table", "load_campaign", "run_campaign", "search_status"]
+__all__ = [
+    "Campaign",
+    "campaign_table",
+    "done_runs",
+    "load_campaign",
+    "run_campaign",
+    "search_status",
+]
 
 log = logging.getLogger(__name__)
 
@@ -206,7 +213,7 @@ def run_campaign(
     status = write_status(campaign, out)
     if stage == "train":
         return out / "status.json"
-    done = [r for r, s in status["runs"].items() if s["state"] == "done"]
+    done = done_runs(status)
     if not done:
         raise ConfigError(f"No finished run in {out / 'runs'} to evaluate; train first.")
     _evaluate(campaign, out, done, workers, executor, address, progress)
@@ -266,8 +273,13 @@ def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) ->
     return status
 
 
-def search_status(campaign: Campaign, out: Path) -> dict[str, int] | None:
-    """How far the optimal attack's search has come for the finished runs (None: no search).
+def done_runs(status: dict[str, Any]) -> list[str]:
+    """The finished runs of a `write_status` result, in the campaign's order."""
+    return [r for r, s in status["runs"].items() if s["state"] == "done"]
+
+
+def search_status(campaign: Campaign, out: Path, done: Sequence[str]) -> dict[str, int] | None:
+    """How far the optimal attack's search has come for the finished runs `done` (None: no search).
 
     ``{"trained", "candidates", "trained_steps", "steps"}``: candidates whose part file exists
     (`advgame.evaluation.attacks.optimal.candidate_jobs`), and their adversary steps, out of
@@ -282,9 +294,6 @@ def search_status(campaign: Campaign, out: Path) -> dict[str, int] | None:
     from advgame.runner.units import unit_key
     from advgame.workflows.suite import observation_agent
 
-    done = [
-        r for r in campaign.runs() if _progress(run_dir(out, r)) >= campaign.config(r).iterations
-    ]
     threat = campaign.threat or default_threat(campaign.scenario)
     protagonists = {r: run_protagonist(run_dir(out, r))[1] for r in done}
     grid = campaign.search_grid() or OPTIMAL_GRID

@@ -334,7 +334,7 @@ class _CandidateProgress:
         """Candidate `index` finished (`before`: read back from its part file)."""
         unit = self.units[index]
         if before:
-            getattr(self.bar, "skip", self.bar.update)(unit.steps)
+            self._skip(unit.steps)
             return
         self.trained += 1
         self.bar.set_postfix_str(
@@ -343,10 +343,14 @@ class _CandidateProgress:
         )
         rest = max(unit.steps - self.partial, 0)  # all of it from a pool worker (no reports)
         if self.partial and rest:  # resumed: the steps before its save are not this run's rate
-            getattr(self.bar, "skip", self.bar.update)(rest)
+            self._skip(rest)
             rest = 0
         self.bar.update(rest)  # writes the milestone's line
         self.partial = 0
+
+    def _skip(self, n: int) -> None:
+        """Count `n` steps done before this run (`LineProgress.skip`; a tqdm bar just counts)."""
+        getattr(self.bar, "skip", self.bar.update)(n)
 
 
 def write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:
