@@ -42,10 +42,10 @@ from advgame.runner.units import (
     Options,
     UnitRecord,
     _name,
-    _read_part,
     digest,
     drop_scratch,
     first_action,
+    read_part,
     ship,
     unit_key,
 )
@@ -149,7 +149,7 @@ def run_units(
         parts.mkdir(parents=True, exist_ok=True)
     needs_pickle = parts is not None or executor != "local" or (workers > 1 and len(units) > 1)
     keys = [unit_key(u) if needs_pickle else f"unit-{i}" for i, u in enumerate(units)]
-    records: list[UnitRecord | None] = [_read_part(parts, k) for k in keys]
+    records: list[UnitRecord | None] = [read_part(parts, k) for k in keys]
     todo = [i for i, r in enumerate(records) if r is None]
     if len(todo) < len(units):
         log.info("%d of %d jobs already done in %s", len(units) - len(todo), len(units), parts)

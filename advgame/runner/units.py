@@ -38,9 +38,11 @@ __all__ = [
     "first_action",
     "init_worker",
     "pickled",
+    "read_part",
     "retry",
     "ship",
     "timed",
+    "write_part",
 ]
 
 log = logging.getLogger(__name__)
@@ -306,7 +308,7 @@ def finish(rec: UnitRecord, out: dict[str, Any], opts: Options) -> UnitRecord:
     for name, value in out.items():
         setattr(rec, name, value)
     rec.extra["received"] = time.time()
-    _write_part(opts.parts, rec)
+    write_part(opts.parts, rec)
     drop_scratch(opts.parts, rec.key)
     if opts.progress is not None:
         opts.progress.done(rec.key)
@@ -322,7 +324,8 @@ def retry(rec: UnitRecord, error: str, opts: Options) -> bool:
     return again
 
 
-def _read_part(parts: Path | None, key: str) -> UnitRecord | None:
+def read_part(parts: Path | None, key: str) -> UnitRecord | None:
+    """The record in ``<parts>/<key>.pkl`` (attempts 0: read back), None without one."""
     if parts is None or not (parts / f"{key}.pkl").exists():
         return None
     path = parts / f"{key}.pkl"
@@ -338,7 +341,8 @@ def _read_part(parts: Path | None, key: str) -> UnitRecord | None:
     return rec
 
 
-def _write_part(parts: Path | None, rec: UnitRecord) -> None:
+def write_part(parts: Path | None, rec: UnitRecord) -> None:
+    """Write `rec` to ``<parts>/<rec.key>.pkl`` at once (a kill leaves it whole or absent)."""
     if parts is None:
         return
     write_atomic(parts / f"{rec.key}.pkl", pickle.dumps(rec))  # a kill: whole or absent

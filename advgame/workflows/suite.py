@@ -50,6 +50,7 @@ from advgame.evaluation.table.protagonists import (
     cli_protagonists,
     run_protagonist,
 )
+from advgame.evaluation.table.stored import adopt_earlier_table
 
 __all__ = [
     "BUDGETS",
@@ -159,6 +160,8 @@ def evaluate_policies(
     if released is not None:
         jobs += released_jobs(scenario, threat, agent, protagonists, released, seeds=seed_list,
                               episodes=episodes)  # fmt: skip
+    if resume:
+        adopt_earlier_table(jobs, out)
     table = evaluate(jobs, workers=workers, progress=progress, results_dir=out if resume else None)
     table.to_csv(out / "payoff.csv")
     if optimal is not None:

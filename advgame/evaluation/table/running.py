@@ -21,9 +21,9 @@ from advgame.core.policy import WhiteBox, WhiteBoxForwarder
 from advgame.core.progress import progress as progress_display
 from advgame.errors import ConfigError
 from advgame.evaluation.table.applicable import Rows, learn_ahead, not_applicable
-from advgame.evaluation.table.batched import LOCKSTEP_EPISODES
-from advgame.evaluation.table.jobs import EvalJob, lockstep_groups, split_seeds, unit_size
+from advgame.evaluation.table.jobs import EvalJob, unit_size
 from advgame.evaluation.table.payoff import PayoffTable
+from advgame.evaluation.table.stored import Layout, read_jobs, store_jobs
 from advgame.runner.run import EXECUTORS, first_action, run_units, write_timings
 
 __all__ = ["evaluate", "run_job", "run_unit", "use_executor"]
@@ -159,13 +159,15 @@ def evaluate(
     in the table's `PayoffTable.not_applicable` with the reason, before any job is queued.
 
     In this process (local, one worker) consecutive jobs are grouped by up to
-    `LOCKSTEP_EPISODES` episodes (`lockstep_groups`) and every group is one unit, all its
-    episodes played in lockstep with batched policy calls across jobs; a pool or Ray gets
-    units of seeds (`split_seeds`, `unit_size`), at least three per worker, so a long cell does
-    not hold up a whole table. The
-    rows are the same either way. Units run on `advgame.runner.run.run_units`:
-    retried when a worker dies, and never recomputed after a restart when `results_dir` is
-    given (with the same `workers`, which sets the units).
+    `advgame.evaluation.table.batched.LOCKSTEP_EPISODES` episodes (`lockstep_groups`) and
+    every group is one unit, all its episodes played in lockstep with batched policy calls
+    across jobs; a pool or Ray gets units of seeds (`split_seeds`, `unit_size`), at least
+    three per worker, so a long cell does not hold up a whole table. The rows are the same
+    either way, but for the last digits: batched and per-job play round
+    differently. Units run on `advgame.runner.run.run_units`, retried when a worker dies.
+    With `results_dir`, every finished job is kept in a part file of its own, whatever unit
+    played it (`advgame.evaluation.table.stored`), and read back instead of played again,
+    with any `workers` and with rows or columns added since.
 
     Args:
         jobs: the cells to play.
@@ -179,8 +181,8 @@ def evaluate(
         address: Ray cluster address (``"auto"``, ``"ray://head:10001"``); None: a Ray already
             initialized here, or a new local one.
         max_retries: extra attempts of a unit whose worker died.
-        results_dir: a folder for one part file per finished unit (``parts/``) and the units'
-            timings (``jobs.jsonl``: pid, start, end, attempts, start-up seconds).
+        results_dir: a folder for one part file per finished job (``parts/``; a unit's own
+            file while a group of jobs is under way) and the units' timings (``jobs.jsonl``: pid, start, end, attempts, start-up seconds).
         ship_files: send checkpoint files to the workers as bytes (default: on Ray only).
 
     """
@@ -190,6 +192,46 @@ def evaluate(
     if type(workers) is not int or workers < 1:
         raise ConfigError(f"workers must be an int >= 1, got {workers!r}.")
     kind, address = (executor, address) if executor is not None else _DEFAULT_EXECUTOR
+    out = Path(results_dir) if results_dir is not None else None
+    parts = out and out / "parts"
+    stored = read_jobs(jobs, parts)  # played before: known to be playable
+    if any(stored):
+        log.info("%d of %d jobs read back from %s", sum(map(bool, stored)), len(jobs), parts)
+    na = _not_applicable([j for j, r in zip(jobs, stored, strict=True) if r is None],
+                         workers, kind, address)  # fmt: skip
+    keep = [k for k, j in enumerate(jobs) if (j.protagonist, j.adversary) not in na]
+    jobs, stored = [jobs[k] for k in keep], [stored[k] for k in keep]
+    todo = [i for i, r in enumerate(stored) if r is None]
+    new = [jobs[i] for i in todo]
+    if kind == "local" and workers == 1:
+        layout = Layout.groups(new, todo)
+    else:
+        layout = Layout.seeds(new, todo, unit_size(new, workers, kind))
+    log.info(
+        "evaluating %d jobs (%d units) on %s, %d worker(s)",
+        len(todo),
+        len(layout.units),
+        kind,
+        workers,
+    )
+    bar = progress_display(len(layout.units), "evaluate", show=progress)
+    try:
+        records = run_units(run_unit, layout.units, executor=kind, workers=workers,
+                            address=address, max_retries=max_retries, parts_dir=parts,
+                            ship_files=ship_files, start_method=start_method, progress=bar)  # fmt: skip
+    finally:
+        bar.close()
+    played = store_jobs(jobs, layout, records, parts)
+    if out is not None:
+        write_timings([r for r in stored if r is not None] + records, out / "jobs.jsonl")
+    rows = [played[i] if r is None else r.value for i, r in enumerate(stored)]
+    return PayoffTable((row for job_rows in rows for row in job_rows), na)
+
+
+def _not_applicable(
+    jobs: list[EvalJob], workers: int, kind: str, address: str | None
+) -> dict[tuple[str, str], str]:
+    """Learn what `jobs`' columns learn per protagonist, then return the cells they cannot play."""
     with Rows() as rows:  # each row's protagonists built once for both checks
         learned = learn_ahead(jobs, workers=workers, executor=kind, address=address, rows=rows)
         if learned:
@@ -197,26 +239,7 @@ def evaluate(
         na = not_applicable(jobs, rows)
     if na:
         log.info("%d cell(s) not applicable, not played: %s", len(na), sorted(na))
-        jobs = [j for j in jobs if (j.protagonist, j.adversary) not in na]
-    units: list[Any] = (
-        list(lockstep_groups(jobs, LOCKSTEP_EPISODES))
-        if kind == "local" and workers == 1
-        else split_seeds(jobs, unit_size(jobs, workers, kind))
-    )
-    log.info(
-        "evaluating %d jobs (%d units) on %s, %d worker(s)", len(jobs), len(units), kind, workers
-    )
-    out = Path(results_dir) if results_dir is not None else None
-    bar = progress_display(len(units), "evaluate", show=progress)
-    try:
-        records = run_units(run_unit, units, executor=kind, workers=workers, address=address,
-                            max_retries=max_retries, parts_dir=out and out / "parts",
-                            ship_files=ship_files, start_method=start_method, progress=bar)  # fmt: skip
-    finally:
-        bar.close()
-    if out is not None:
-        write_timings(records, out / "jobs.jsonl")
-    return PayoffTable((row for rec in records for row in rec.value), na)
+    return na
 
 
 _DEFAULT_EXECUTOR: tuple[str, str | None] = ("local", None)

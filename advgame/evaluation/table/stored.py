@@ -1,0 +1,167 @@
+"""A table's finished cells on disk: one part file per job, whatever the units that played it.
+
+`advgame.evaluation.evaluate` plays jobs in units that depend on how it runs (lockstep groups
+of consecutive jobs in this process, units of seeds on a pool or Ray), and a unit's part file is
+named after the unit. Named that way alone, a table played again with another ``workers``, or
+with rows or columns added (which shift every lockstep group after them), would find none of its
+finished cells and play them again; and since batched and per-job play round differently in
+chaotic dynamics, the numbers would move in their last digits. So once a unit is played its
+rows are also kept per job (`store_jobs`, ``<parts>/<job key>.pkl``, the key `unit_key` gives
+the job), and a table reads its finished jobs back from those (`read_jobs`) before it cuts the
+rest into units. A unit that is its job (a whole job on a pool) is its own job part.
+
+`adopt_groups` splits part files of lockstep groups written before per-job parts existed into
+per-job parts, given the cells of the table they were played for (`adopt_earlier_table`: the
+cells of the ``payoff.csv`` beside them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Collection, Sequence
+from pathlib import Path
+from typing import Any
+
+from advgame.evaluation.table.batched import LOCKSTEP_EPISODES
+from advgame.evaluation.table.jobs import EvalJob, lockstep_groups
+from advgame.runner.units import UnitRecord, read_part, unit_key, write_part
+
+__all__ = ["Layout", "adopt_earlier_table", "adopt_groups", "read_jobs", "store_jobs"]
+
+log = logging.getLogger(__name__)
+
+
+def read_jobs(jobs: Sequence[EvalJob], parts: Path | None) -> list[UnitRecord | None]:
+    """Each job's stored record (its rows in ``value``), None for a job not played yet."""
+    if parts is None:
+        return [None] * len(jobs)
+    return [read_part(parts, unit_key(j)) for j in jobs]
+
+
+@dataclasses.dataclass
+class Layout:
+    """Units cut from jobs, and which job each stretch of a unit's rows belongs to."""
+
+    units: list[Any]
+    """What `advgame.runner.run.run_units` runs: jobs, jobs of fewer seeds, or groups."""
+    owners: list[list[tuple[int, int]]]
+    """Per unit, ``(job index, rows)`` in the order of its rows: one row per episode."""
+
+    @classmethod
+    def groups(cls, jobs: Sequence[EvalJob], index: Sequence[int]) -> Layout:
+        """Lockstep groups of `jobs` (`lockstep_groups`); `index` numbers the jobs."""
+        at = dict(zip(map(id, jobs), index, strict=True))
+        units: list[Any] = lockstep_groups(jobs, LOCKSTEP_EPISODES)
+        owners = [[(at[id(j)], _rows(j)) for j in group] for group in units]
+        return cls(units, owners)
+
+    @classmethod
+    def seeds(cls, jobs: Sequence[EvalJob], index: Sequence[int], per_unit: int) -> Layout:
+        """Each job cut into units of at most `per_unit` seeds (`split_seeds`'s order)."""
+        units: list[Any] = []
+        owners = []
+        for job, i in zip(jobs, index, strict=True):
+            for s in range(0, len(job.seeds), per_unit):
+                part = job if per_unit >= len(job.seeds) else dataclasses.replace(
+                    job, seeds=tuple(job.seeds[s : s + per_unit]))  # fmt: skip
+                units.append(part)
+                owners.append([(i, _rows(part))])
+        return cls(units, owners)
+
+
+def _rows(job: EvalJob) -> int:
+    return len(job.seeds) * job.episodes
+
+
+def store_jobs(
+    jobs: Sequence[EvalJob], layout: Layout, records: Sequence[UnitRecord], parts: Path | None
+) -> dict[int, list[dict[str, Any]]]:
+    """Split the units' rows per job; keep each job's in its own part file; return them by index.
+
+    A unit part whose rows are now all in job parts is removed (the job parts hold its result);
+    a unit that is a whole job is its own job part already.
+    """
+    rows: dict[int, list[dict[str, Any]]] = {}
+    source: dict[int, UnitRecord] = {}
+    for unit, owners, rec in zip(layout.units, layout.owners, records, strict=True):
+        at = 0
+        for i, n in owners:
+            chunk = rec.value[at : at + n]
+            at += n
+            _check(jobs[i], chunk, n, unit)
+            rows.setdefault(i, []).extend(chunk)
+            source[i] = rec
+        if at != len(rec.value):
+            raise RuntimeError(f"unit {rec.key} has {len(rec.value)} rows, its jobs {at}")
+    if parts is None:
+        return rows
+    unit_keys = {rec.key for rec in records}  # a whole job is its own part already
+    for i, job_rows in rows.items():
+        key = unit_key(jobs[i])
+        if key not in unit_keys:
+            write_part(parts, _job_record(key, job_rows, source[i]))
+    job_keys = {unit_key(jobs[i]) for i in rows}
+    for key in unit_keys - job_keys:
+        (parts / f"{key}.pkl").unlink(missing_ok=True)
+    return rows
+
+
+def _job_record(key: str, rows: list[dict[str, Any]], unit: UnitRecord) -> UnitRecord:
+    return UnitRecord(key=key, value=rows, attempts=unit.attempts, pid=unit.pid, host=unit.host,
+                      start=unit.start, end=unit.end, extra={"unit": unit.key})  # fmt: skip
+
+
+def _check(job: EvalJob, chunk: list[dict[str, Any]], n: int, unit: Any) -> None:
+    names = {(r.get("protagonist"), r.get("adversary")) for r in chunk}
+    if len(chunk) != n or names != {(job.protagonist, job.adversary)}:
+        raise RuntimeError(
+            f"the rows of unit {unit!r} do not line up with its jobs at {job.protagonist!r} vs "
+            f"{job.adversary!r} ({len(chunk)} rows for {n} episodes, names {sorted(names)})"
+        )
+
+
+def adopt_groups(jobs: Sequence[EvalJob], parts: Path, cells: Collection[tuple[str, str]]) -> int:
+    """Split a lockstep-grouped table's part files into per-job parts; return the jobs adopted.
+
+    `cells` are the (protagonist, adversary) cells of the table the groups were played for
+    (its ``payoff.csv``); the jobs of those cells, in `jobs`' order, grouped as one process
+    grouped them then (`lockstep_groups`), name the group part files. Each group found is split
+    (`store_jobs`, which removes the group's file), its rows replacing any older part of one of
+    its jobs: the group's rows are the ones that table shows. Jobs whose specs changed since
+    name other groups and are not adopted.
+    """
+    cells = set(cells)
+    old = [(i, j) for i, j in enumerate(jobs) if (j.protagonist, j.adversary) in cells]
+    if not old or not parts.is_dir():
+        return 0
+    layout = Layout.groups([j for _, j in old], [i for i, _ in old])
+    adopted = 0
+    for unit, owners in zip(layout.units, layout.owners, strict=True):
+        rec = read_part(parts, unit_key(unit))
+        if rec is None:
+            continue
+        try:
+            store_jobs(jobs, Layout([unit], [owners]), [rec], parts)
+        except RuntimeError as e:  # a file of another table under the same name: left alone
+            log.warning("part file %s not split per job: %s", rec.key, e)
+            continue
+        adopted += len(owners)
+    if adopted:
+        log.info("split %d jobs' rows out of lockstep-group part files in %s", adopted, parts)
+    return adopted
+
+
+def adopt_earlier_table(jobs: Sequence[EvalJob], out: Path) -> int:
+    """`adopt_groups` for the table last written to `out` (``payoff.csv`` names its cells).
+
+    Tables played in one process before 27 Nov 2026 kept a part file per lockstep group in
+    ``out/parts``; a table with a row or column added would otherwise play them all again.
+    """
+    from advgame.evaluation.table.payoff import PayoffTable
+
+    last, parts = out / "payoff.csv", out / "parts"
+    if not (last.is_file() and parts.is_dir()):
+        return 0
+    rows = PayoffTable.from_csv(last).rows
+    return adopt_groups(jobs, parts, {(r["protagonist"], r["adversary"]) for r in rows})
