@@ -49,7 +49,7 @@ from stable_baselines3.common.utils import polyak_update
 from torch import nn
 from torch.nn import functional as F
 
-from advgame.agents.ompo_nets import OMPOPolicy
+from advgame.agents.ompo_nets import OMPOPolicy, SigmoidTanh
 
 __all__ = ["OMPO", "OMPOReplayBuffer", "TransitionDiscriminator"]
 
@@ -60,12 +60,12 @@ class TransitionDiscriminator(nn.Module):
     def __init__(self, inputs: int, hidden: int = 256, lr: float = 3e-4, penalty: float = 10.0):
         super().__init__()
         self.trunk = nn.Sequential(
-            nn.Linear(inputs, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
+            nn.Linear(inputs, hidden), SigmoidTanh(), nn.Linear(hidden, hidden), SigmoidTanh(),
             nn.Linear(hidden, 1),
         )  # fmt: skip
         self.penalty = penalty
         """λ of the gradient penalty."""
-        self.optimizer = th.optim.Adam(self.trunk.parameters(), lr=lr)
+        self.optimizer = th.optim.Adam(self.trunk.parameters(), lr=lr, fused=True)
 
     def forward(self, x: th.Tensor) -> th.Tensor:
         """The logit of 'local' for the concatenated ``(s, a, s')`` rows of `x`."""

@@ -230,3 +230,22 @@ def test_ompo_learns_to_balance_the_inverted_pendulum() -> None:
             total, done = total + float(reward), term or trunc
         returns.append(total)
     assert np.mean(returns) > 900  # the maximum is 1,000; a random policy keeps it up ~5 steps
+
+
+def test_sigmoid_tanh_is_tanh_in_value_gradient_and_second_gradient() -> None:
+    from advgame.agents.ompo_nets import OMPOPolicy, SigmoidTanh
+
+    x = th.linspace(-12, 12, 2001, dtype=th.float64).reshape(-1, 1).requires_grad_(True)
+    fast = SigmoidTanh()
+    assert th.allclose(fast(x), th.tanh(x), atol=1e-15, rtol=0)
+    (g_fast,) = th.autograd.grad(fast(x).sum(), x)
+    (g_ref,) = th.autograd.grad(th.tanh(x).sum(), x)
+    assert th.allclose(g_fast, g_ref, atol=1e-12)
+    # the discriminator's gradient penalty differentiates the gradient
+    assert th.autograd.gradgradcheck(fast, (x[::100].detach().requires_grad_(True),))
+    x32 = th.randn(512, 256)
+    assert (fast(x32) - th.tanh(x32)).abs().max() < 5e-7
+    model = OMPO("MlpPolicy", "Pendulum-v1", device="cpu", seed=0)
+    assert isinstance(model.policy, OMPOPolicy)
+    assert model.critic.optimizer.defaults["fused"] and model.actor.optimizer.defaults["fused"]
+    assert any(isinstance(m, SigmoidTanh) for m in model.critic.modules())
