@@ -175,9 +175,11 @@ class DBCPolicy(SACPolicy):
         action_dim = int(self.action_space.shape[0])  # type: ignore[index]
         self.transition_model = GaussianTransition(self.feature_dim, action_dim, self.model_width)
         self.reward_decoder = reward_decoder(self.feature_dim, self.model_width)
-        self.encoder_optimizer = th.optim.Adam(self.encoder.parameters(), lr=self.encoder_lr)
+        self.encoder_optimizer = th.optim.Adam(
+            self.encoder.parameters(), lr=self.encoder_lr, fused=True
+        )
         decoders = [*self.transition_model.parameters(), *self.reward_decoder.parameters()]
-        self.decoder_optimizer = th.optim.Adam(decoders, lr=self.decoder_lr)
+        self.decoder_optimizer = th.optim.Adam(decoders, lr=self.decoder_lr, fused=True)
 
     @property
     def encoder(self) -> BisimEncoder:

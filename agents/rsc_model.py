@@ -121,7 +121,8 @@ class CausalWorldModel(nn.Module):
         self.inputs, self.targets = RunningNorm(n_in), RunningNorm(n_out)
         weights = [self.w1, self.b1, self.w2, self.b2, self.w3, self.b3]
         self.optimizer = th.optim.Adam(
-            [{"params": weights, "lr": lr}, {"params": [self.graph_logits], "lr": graph_lr}]
+            [{"params": weights, "lr": lr}, {"params": [self.graph_logits], "lr": graph_lr}],
+            fused=True,
         )
 
     def edge_probabilities(self) -> th.Tensor:

@@ -311,7 +311,7 @@ class SafeLearner(TeamLearner):
             c.obs_dims, c.act_dims, config.net_arch, config.log_std_init, gen
         )
         self.optimizer = torch.optim.Adam(
-            self.model.parameters(), lr=config.learning_rate, eps=1e-5
+            self.model.parameters(), lr=config.learning_rate, eps=1e-5, fused=True
         )
         self.episode_cost = 0.0
         """The last estimate of the observed episode cost J_c."""

@@ -106,7 +106,8 @@ class _SB3Config:
             "device": "cpu",
             "verbose": 0,
             "tensorboard_log": tensorboard_log,
-            "policy_kwargs": {"net_arch": list(self.net_arch)},
+            # fused Adam: one kernel for all parameters (PPO.train 1.27x: benchmarks/bench_adam.py)
+            "policy_kwargs": {"net_arch": list(self.net_arch), "optimizer_kwargs": {"fused": True}},
         }
 
 
