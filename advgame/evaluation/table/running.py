@@ -214,7 +214,9 @@ def evaluate(
         kind,
         workers,
     )
-    bar = progress_display(len(layout.units), "evaluate", show=progress)
+    kept = len(jobs) - len(todo)
+    what = f"evaluate ({kept} of {len(jobs)} cells read back)" if kept else "evaluate"
+    bar = progress_display(len(layout.units), what, show=progress)
     try:
         records = run_units(run_unit, layout.units, executor=kind, workers=workers,
                             address=address, max_retries=max_retries, parts_dir=parts,
