@@ -10,7 +10,8 @@ import pytest
 import advgame
 from advgame.cli import main
 from advgame.errors import ConfigError, FileFormatError
-from advgame.workflows.campaign import load_campaign, run_dir
+from advgame.evaluation import PayoffTable
+from advgame.workflows.campaign import load_campaign, run_dir, table_status
 
 TINY = """
 scenario = "Hopper-v5"
@@ -69,6 +70,8 @@ def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(
         "atla-s0": "pending",
         "atla-s1": "pending",
     }
+    campaign = load_campaign(spec)
+    assert table_status(campaign, out, ["ppo-s0", "ppo-s1"]) == {"played": 0, "cells": 6}
     before = _stamps(out, ["ppo-s0", "ppo-s1"])
     for run in (
         "ppo-s0",
@@ -88,11 +91,14 @@ def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(
     assert lines[0].startswith("method,seeds,median_agent,natural,worst")
     assert len(lines) == 3
     assert "![training curves](curves.png)" in table and (out / "curves.png").stat().st_size
-    # Once more (same workers, so the same units): nothing is trained or played again.
+    rows = PayoffTable.from_csv(out / "results" / "payoff.csv").rows
+    cells = {(r["protagonist"], r["adversary"]) for r in rows}
+    assert table_status(campaign, out, status["evaluated"]) == {"played": 12, "cells": 12}
+    assert len(cells) == 12 and len(list((out / "results" / "parts").iterdir())) == 12
+    # Once more, with one worker (so other units): nothing is trained or played again.
     parts = {p: p.stat().st_mtime_ns for p in (out / "results" / "parts").iterdir()}
     runs = _stamps(out, list(status["runs"]))
-    assert parts
-    assert main(["campaign", str(spec), "--workers", "2", "--no-progress"]) == 0
+    assert main(["campaign", str(spec), "--workers", "1", "--no-progress"]) == 0
     assert {p: p.stat().st_mtime_ns for p in (out / "results" / "parts").iterdir()} == parts
     assert _stamps(out, list(status["runs"])) == runs
 
@@ -221,7 +227,9 @@ def test_status_counts_the_optimal_attacks_candidates_by_their_part_files(
     }  # fmt: skip
     assert main(["campaign", str(spec), "--status"]) == 0
     words = f"optimal attack (finished runs): 1/{len(offered)} candidates trained"
-    assert words in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert words in printed
+    assert "table (finished runs, without the optimal column): 0/" in printed
 
 
 def test_a_method_may_have_more_seeds_than_the_others(tmp_path: Path) -> None:

@@ -43,6 +43,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         load_campaign,
         run_campaign,
         search_status,
+        table_status,
         write_status,
     )
 
@@ -63,6 +64,11 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
                 f"candidates trained, {search['trained_steps']:,}/{search['steps']:,} "
                 "adversary steps"
             )
+        cells = table_status(campaign, out, done_runs(status))
+        print(
+            f"table (finished runs, without the optimal column): {cells['played']}/"
+            f"{cells['cells']} cells played"
+        )
         return 0
     path = run_campaign(
         campaign, out, workers=args.workers, executor=args.executor, address=args.address,

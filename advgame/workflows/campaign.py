@@ -310,6 +310,27 @@ def search_status(campaign: Campaign, out: Path, done: Sequence[str]) -> dict[st
     }
 
 
+def table_status(campaign: Campaign, out: Path, done: Sequence[str]) -> dict[str, int]:
+    """How many cells of the evaluate stage's table for the finished runs `done` are played.
+
+    ``{"played", "cells"}``: cells kept in part files (`advgame.evaluation.table.stored`) out
+    of the table's cells, without the ``attack optimal`` column (its cells depend on the
+    search, `search_status`). Nothing is played or learned; call it as `search_status`.
+    """
+    from advgame.evaluation.table.protagonists import run_protagonist
+    from advgame.evaluation.table.stored import read_jobs
+    from advgame.workflows.cells import table_jobs
+
+    runs = {r: run_dir(out, r) for r in done}
+    if not runs:
+        return {"played": 0, "cells": 0}
+    protagonists = {r: run_protagonist(d)[1] for r, d in runs.items()}
+    _, jobs = table_jobs(campaign.scenario, protagonists, campaign.adversaries, runs=runs,
+                         seeds=campaign.eval_seeds, threat=campaign.threat)  # fmt: skip
+    stored = read_jobs(jobs, out / "results" / "parts")
+    return {"played": sum(r is not None for r in stored), "cells": len(jobs)}
+
+
 def _evaluated(out: Path) -> set[str]:
     """Runs that have rows in the campaign's payoff table."""
     path = out / "results" / "payoff.csv"

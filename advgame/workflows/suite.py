@@ -16,18 +16,15 @@ import logging
 import os
 import shutil
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from advgame.errors import ConfigError
 from advgame.evaluation import (
-    NOMINAL,
     AdversarySetup,
     PayoffTable,
     budget_sweep,
     evaluate,
-    population_jobs,
 )
 from advgame.evaluation.attacks.optimal import (
     OPTIMAL,
@@ -40,7 +37,6 @@ from advgame.evaluation.attacks.optimal import (
 from advgame.evaluation.table.columns import (
     RANDOM,
     SCHEDULED,
-    adversary_columns,
     default_threat,
     describe_column,
     observation_agent,
@@ -51,6 +47,7 @@ from advgame.evaluation.table.protagonists import (
     run_protagonist,
 )
 from advgame.evaluation.table.stored import adopt_earlier_table
+from advgame.workflows.cells import table_jobs
 
 __all__ = [
     "BUDGETS",
@@ -63,9 +60,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-SCHEDULE_EPISODES = 8
-"""Episodes per seed in the scheduled column: seed ``s`` plays episodes ``8s + 1`` to ``8s + 8``
-of a per-episode schedule (`advgame.evaluation.table.jobs.schedule_index`)."""
 BUDGETS = (0.0, 0.05, 0.1, 0.15)
 """Gaussian state-noise σ of the return-vs-budget sweep (the paper's Fig. 3 levels and more)."""
 
@@ -125,29 +119,10 @@ def evaluate_policies(
     if not protagonists:
         raise ConfigError("Nothing to evaluate: give run directories, checkpoints or callables.")
     check_protagonists(scenario, protagonists)
-    if isinstance(adversaries, Mapping):
-        columns = {NOMINAL: AdversarySetup.nominal(), **adversaries}
-    else:
-        columns = adversary_columns(
-            scenario,
-            adversaries,
-            runs=run_dirs,
-            last=last,
-            sample=sample,
-            seed=seed,
-            protagonists=protagonists,
-            threat=threat,
-        )
+    columns, jobs = table_jobs(scenario, protagonists, adversaries, runs=run_dirs, last=last,
+                               sample=sample, seed=seed, seeds=seeds, episodes=episodes,
+                               threat=threat)  # fmt: skip
     seed_list = tuple(range(seeds))
-    jobs = population_jobs(scenario, protagonists, columns, seeds=seed_list, episodes=episodes)
-    # A per-episode schedule plays episode s·E + e + 1 in episode e of seed s: more episodes
-    # per seed cover more of its sequence.
-    jobs = [
-        replace(j, episodes=max(episodes, SCHEDULE_EPISODES))
-        if j.adversary.startswith("scheduled")
-        else j
-        for j in jobs
-    ]
     out.mkdir(parents=True, exist_ok=True)
     threat = threat or default_threat(scenario)
     if optimal is not None and released is not None:
