@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from advgame.agents.sb3_policy import SB3Policy
-from advgame.core.numpy_lstm import recurrent_modules
-from advgame.core.numpy_net import NumpyNet
+from advgame.core.numpy_lstm import LSTMCell, recurrent_modules
+from advgame.core.numpy_net import NumpyNet, weights_stamp
 from advgame.errors import ConfigError
 
 __all__ = ["RecurrentSB3Policy", "is_recurrent"]
@@ -70,6 +70,7 @@ class RecurrentSB3Policy(SB3Policy):
         self._critic: tuple[Any, Any]
         self._seen: list[Any]  # policy inputs since the episode start (critic catch-up)
         self._critic_at: int
+        self._group: tuple[Any, tuple[Any, NumpyNet] | None] | None = None  # `_group_net`
         self._forget()
 
     def _zeros(self) -> tuple[Any, Any]:
@@ -116,16 +117,52 @@ class RecurrentSB3Policy(SB3Policy):
         """
         import torch
 
-        x = torch.as_tensor(self._normalize(np.asarray(observations)))
+        rows = self._normalize(np.asarray(observations))
+        x = torch.as_tensor(rows)
         # through methods, not attributes: a wrapper that forwards to its policy (a mixture
         # drawing one per episode) then reads and writes the memory of the policy it plays
         memories = [p._memory() for p in policies]
+        fast = self._group_net()
+        if fast is not None:  # NumPy: the same operations, without torch's per-call overhead
+            cell, head = fast
+            h_np, c_np = cell.step(
+                rows,
+                np.stack([m[0].numpy().reshape(-1) for m in memories]),
+                np.stack([m[1].numpy().reshape(-1) for m in memories]),
+            )
+            shape = (1, 1, cell.hidden)
+            for i, p in enumerate(policies):
+                memory = (torch.from_numpy(h_np[i].reshape(shape)),
+                          torch.from_numpy(c_np[i].reshape(shape)))  # fmt: skip
+                p._advanced(memory, x[i : i + 1])
+            mean = head.forward(h_np)[0]
+            return self._in_box(mean.reshape((-1, *self.model.action_space.shape)))
         h = torch.cat([m[0] for m in memories], dim=1)
         c = torch.cat([m[1] for m in memories], dim=1)
         actions, (h, c) = self._forward(x, (h, c))
         for i, p in enumerate(policies):
             p._advanced((h[:, i : i + 1].clone(), c[:, i : i + 1].clone()), x[i : i + 1])
         return actions
+
+    def _group_net(self) -> tuple[Any, NumpyNet] | None:
+        """`act_group`'s NumPy pass: the actor's LSTM cell and the mean head after it, or None.
+
+        Only for a deterministic policy whose mean head `recurrent_modules` covers (the mode of
+        a plain Gaussian) and one LSTM layer; copied again when the weights change (a live
+        learner's), as `numpy_net`'s copies are.
+        """
+        if not self.deterministic:
+            return None
+        picked = recurrent_modules(self.model.policy, "mean")
+        if picked is None or picked[1] != "actor":
+            return None
+        lstm, *rest = picked[0]
+        stamp = weights_stamp(picked[0])
+        if self._group is None or self._group[0] != stamp:
+            cell = LSTMCell.of(lstm)
+            head = NumpyNet.of(rest, probe=False) if cell is not None else None
+            self._group = (stamp, None if head is None else (cell, head))
+        return self._group[1]
 
     def _memory(self) -> tuple[Any, Any]:
         """The actor's memory ``(h, c)`` it acts with next."""

@@ -225,3 +225,44 @@ def test_attacks_walk_in_numpy_to_what_the_torch_walk_reaches(
 
 def _refuse(*args: Any) -> Any:
     raise AssertionError("the walk went through torch")
+
+
+@pytest.mark.parametrize("config", list(CONFIGS))
+def test_copies_acting_together_step_in_numpy_as_torch_does(config: str) -> None:
+    """`act_group` of a deterministic victim: each copy's own memory, advanced in NumPy.
+
+    Three copies at three different memories act together; their actions and memories are
+    torch's one-row pass (`act`) on each copy, up to rounding; a stochastic victim keeps torch.
+    """
+    rng = np.random.default_rng(3)
+    copies = [_victim(config, steps) for steps in (0, 2, 5)]
+    alone = [copy.deepcopy(v) for v in copies]
+    for _ in range(4):
+        obs = rng.normal(size=(3, 11)) * 3
+        together = copies[0].act_group(copies, obs)
+        lone = np.stack([v.act(o) for v, o in zip(alone, obs, strict=True)])
+        np.testing.assert_allclose(together, lone, rtol=1e-5, atol=1e-5)
+    assert copies[0]._group_net() is not None  # the NumPy pass played
+    for mine, theirs in zip(copies, alone, strict=True):
+        for a, b in zip(mine.hidden_state()["actor"], theirs.hidden_state()["actor"], strict=True):
+            torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-5)
+        assert len(mine._seen) == len(theirs._seen)
+    stochastic = copy.deepcopy(copies[0])
+    stochastic.deterministic = False
+    assert stochastic._group_net() is None
+
+
+def test_an_lstm_cells_step_is_torchs_lstm_row_by_row() -> None:
+    from advgame.core.numpy_lstm import LSTMCell
+
+    lstm = nn.LSTM(5, 7)
+    g = torch.Generator().manual_seed(0)
+    x, h, c = (torch.randn(4, n, generator=g) for n in (5, 7, 7))
+    cell = LSTMCell.of(lstm)
+    assert cell is not None
+    h_np, c_np = cell.step(x.numpy(), h.numpy(), c.numpy())
+    for i in range(4):
+        with torch.no_grad():
+            _, (h_t, c_t) = lstm(x[i : i + 1, None], (h[None, i : i + 1], c[None, i : i + 1]))
+        np.testing.assert_allclose(h_np[i], h_t.numpy().reshape(-1), rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(c_np[i], c_t.numpy().reshape(-1), rtol=1e-5, atol=1e-6)

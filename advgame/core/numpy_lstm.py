@@ -107,6 +107,23 @@ class LSTMCell:
         tanh_c = np.tanh(f * self._c + i * g)
         return o * tanh_c, (gates, tanh_c)
 
+    def step(self, x: np.ndarray, h: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One step of every row from its own memory: ``(h', c')`` for ``x [n, in]``, ``h, c [n, H]``.
+
+        What a batch of episodes that each carry their memory needs (no gradient). Each row is
+        multiplied alone (``[n, 1, in] @ W``), as in `forward`.
+        """
+        size = self.hidden
+        h32 = np.asarray(h, dtype=np.float32)[:, None, :]
+        z = np.matmul(np.asarray(x, dtype=np.float32)[:, None, :], self._w)
+        z += np.matmul(h32, self._w_hh_t)
+        z += self._bias
+        gates = _sigmoid(z)
+        gates[..., 2 * size : 3 * size] = np.tanh(z[..., 2 * size : 3 * size])
+        i, f, g, o = (gates[..., k * size : (k + 1) * size] for k in range(4))
+        c_next = f * np.asarray(c, dtype=np.float32)[:, None, :] + i * g
+        return (o * np.tanh(c_next))[:, 0, :], c_next[:, 0, :]
+
     def backward(self, saved: tuple[np.ndarray, np.ndarray], grad: np.ndarray) -> np.ndarray:
         """The gradient in ``x`` of ``(h' * grad).sum()`` (`forward`'s `saved`), ``[n, 1, in]``."""
         gates, tanh_c = saved
