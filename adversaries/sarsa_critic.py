@@ -198,7 +198,7 @@ def fit_sarsa(
     stats = _stats(data)
     q = QNetwork(data["obs"].shape[1], data["act"].shape[1], hidden, stats)
     target = QNetwork(data["obs"].shape[1], data["act"].shape[1], hidden, stats)
-    opt = torch.optim.Adam(q.net.parameters(), lr=lr, fused=True)
+    opt = torch.optim.Adam(q.net.parameters(), lr=lr, foreach=True)
     t = {k: torch.as_tensor(v) for k, v in data.items()} | {"next_act": torch.as_tensor(next_act)}
     reward = t["rew"] / float(stats["rew_scale"])
     # The last step of a truncated episode bootstraps on its own next state; a terminal one not.

@@ -231,7 +231,7 @@ class TeamLearner:
             self.generator,
         )
         self.optimizer = torch.optim.Adam(
-            self.model.parameters(), lr=config.learning_rate, eps=1e-5, fused=True
+            self.model.parameters(), lr=config.learning_rate, eps=1e-5, foreach=True
         )
 
     def _seed(self, seed: int) -> None:

@@ -96,12 +96,17 @@ class OMPOCritic(ContinuousCritic):
 class OMPOPolicy(SACPolicy):
     """`SACPolicy` whose actor and critics use OMPO's networks (hidden [256, 256] by default).
 
-    Their Adam is fused (``optimizer_kwargs={"fused": True}`` unless given otherwise).
+    Their Adam is fused (unless ``optimizer_kwargs`` says ``"fused": False``): no NumPy copy
+    reads these networks while they train (`advgame.agents.sb3` explains the choice).
     """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("net_arch", [256, 256])
-        kwargs["optimizer_kwargs"] = {"fused": True, **(kwargs.get("optimizer_kwargs") or {})}
+        options = dict(kwargs.get("optimizer_kwargs") or {})
+        if options.get("fused") is not False:  # fused, in place of advgame's default foreach
+            options.pop("foreach", None)
+            options["fused"] = True
+        kwargs["optimizer_kwargs"] = options
         super().__init__(*args, **kwargs)
 
     def make_actor(self, features_extractor: Any = None) -> Actor:

@@ -106,8 +106,13 @@ class _SB3Config:
             "device": "cpu",
             "verbose": 0,
             "tensorboard_log": tensorboard_log,
-            # fused Adam: one kernel for all parameters (PPO.train 1.27x: benchmarks/bench_adam.py)
-            "policy_kwargs": {"net_arch": list(self.net_arch), "optimizer_kwargs": {"fused": True}},
+            # foreach Adam: fewer kernels than the default loop, and unlike the fused kernel it
+            # marks the parameters it updates (their ``_version``), which NumPy copies of a
+            # live learner check (`advgame.core.numpy_net.weights_stamp`; bench_adam.py)
+            "policy_kwargs": {
+                "net_arch": list(self.net_arch),
+                "optimizer_kwargs": {"foreach": True},
+            },
         }
 
 

@@ -1,8 +1,10 @@
 """PPO's update with PyTorch's fused Adam beside its for-loop and foreach kernels, in one run.
 
-advgame's SB3 learners pass ``optimizer_kwargs={"fused": True}`` (`advgame.agents.sb3`): on the
-CPU, Adam's default is a Python loop over the parameters, several small kernels each, and a
-64-wide PPO has a dozen parameter tensors updated 320 times a rollout. This builds three PPOs
+On the CPU, Adam's default is a Python loop over the parameters, several small kernels each,
+and a 64-wide PPO has a dozen parameter tensors updated 320 times a rollout; advgame's SB3
+learners use the foreach kernel (``optimizer_kwargs={"foreach": True}``, `advgame.agents.sb3`:
+the fused one does not mark the tensors it updates, which NumPy copies of a live learner
+check), OMPO, RSC and DBC the fused one (docs/throughput.md). This builds three PPOs
 with advgame's `PPOConfig` on Hopper-v5 (4 envs, one torch thread), identical but for Adam's
 kernel, collects one rollout each, then times their ``train()`` (10 epochs over the rollout),
 interleaved, and a whole ``learn`` of `--steps` steps for the for-loop and the fused one. The

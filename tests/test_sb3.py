@@ -88,3 +88,23 @@ def test_ppo_trains_on_the_view(make_view) -> None:
             obs, _ = view.reset()
     assert np.ptp(np.stack(actions), axis=0).max() > 0.0  # the policy reacts to its input
     view.close()
+
+
+@pytest.mark.parametrize("algo", ["ppo", "recurrent-ppo"])
+def test_an_update_changes_the_weights_stamp_numpy_copies_check(algo: str) -> None:
+    """NumPy copies of a live learner (PGD-AT, SA-PPO, a frozen LSTM's group step) are rebuilt
+    when `weights_stamp` changes: the optimizer must mark what it updates (PyTorch's fused Adam
+    does not bump ``_version``; the foreach kernel does)."""
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from advgame.agents import PPOConfig, RecurrentPPOConfig
+    from advgame.core.numpy_net import weights_stamp
+
+    cls = PPOConfig if algo == "ppo" else RecurrentPPOConfig
+    model = cls(n_steps=64, batch_size=32, n_epochs=1).make_model(
+        DummyVecEnv([lambda: gym.make("Pendulum-v1")]), seed=0, total_steps=128
+    )
+    before = weights_stamp([model.policy])
+    model.learn(64)
+    assert weights_stamp([model.policy]) != before
