@@ -99,13 +99,8 @@ class LSTMCell:
 
     def forward(self, x: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """``h'`` for the rows of ``x [n, 1, in]``, and the gates and ``tanh(c')``."""
-        size = self.hidden
-        z = np.matmul(x, self._w) + self._step_bias
-        gates = _sigmoid(z)
-        gates[..., 2 * size : 3 * size] = np.tanh(z[..., 2 * size : 3 * size])
-        i, f, g, o = (gates[..., k * size : (k + 1) * size] for k in range(4))
-        tanh_c = np.tanh(f * self._c + i * g)
-        return o * tanh_c, (gates, tanh_c)
+        gates, _, tanh_c = self._cell(np.matmul(x, self._w) + self._step_bias, self._c)
+        return gates[..., 3 * self.hidden :] * tanh_c, (gates, tanh_c)
 
     def step(self, x: np.ndarray, h: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One step of every row from its own memory: ``(h', c')`` for ``x [n, in]``, ``h, c [n, H]``.
@@ -113,16 +108,21 @@ class LSTMCell:
         What a batch of episodes that each carry their memory needs (no gradient). Each row is
         multiplied alone (``[n, 1, in] @ W``), as in `forward`.
         """
-        size = self.hidden
         h32 = np.asarray(h, dtype=np.float32)[:, None, :]
         z = np.matmul(np.asarray(x, dtype=np.float32)[:, None, :], self._w)
         z += np.matmul(h32, self._w_hh_t)
         z += self._bias
+        gates, c_next, tanh_c = self._cell(z, np.asarray(c, dtype=np.float32)[:, None, :])
+        return (gates[..., 3 * self.hidden :] * tanh_c)[:, 0, :], c_next[:, 0, :]
+
+    def _cell(self, z: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The gates (i, f, g, o) from their pre-activations `z`, ``c' = f c + i g`` and ``tanh(c')``."""
+        size = self.hidden
         gates = _sigmoid(z)
         gates[..., 2 * size : 3 * size] = np.tanh(z[..., 2 * size : 3 * size])
-        i, f, g, o = (gates[..., k * size : (k + 1) * size] for k in range(4))
-        c_next = f * np.asarray(c, dtype=np.float32)[:, None, :] + i * g
-        return (o * np.tanh(c_next))[:, 0, :], c_next[:, 0, :]
+        i, f, g = (gates[..., k * size : (k + 1) * size] for k in range(3))
+        c_next = f * c + i * g
+        return gates, c_next, np.tanh(c_next)
 
     def backward(self, saved: tuple[np.ndarray, np.ndarray], grad: np.ndarray) -> np.ndarray:
         """The gradient in ``x`` of ``(h' * grad).sum()`` (`forward`'s `saved`), ``[n, 1, in]``."""

@@ -182,7 +182,8 @@ def evaluate(
             initialized here, or a new local one.
         max_retries: extra attempts of a unit whose worker died.
         results_dir: a folder for one part file per finished job (``parts/``; a unit's own
-            file while a group of jobs is under way) and the units' timings (``jobs.jsonl``: pid, start, end, attempts, start-up seconds).
+            file while a group of jobs is under way) and the units' timings (``jobs.jsonl``:
+            pid, start, end, attempts, start-up seconds).
         ship_files: send checkpoint files to the workers as bytes (default: on Ray only).
 
     """
@@ -195,8 +196,6 @@ def evaluate(
     out = Path(results_dir) if results_dir is not None else None
     parts = out and out / "parts"
     stored = read_jobs(jobs, parts)  # played before: known to be playable
-    if any(stored):
-        log.info("%d of %d jobs read back from %s", sum(map(bool, stored)), len(jobs), parts)
     na = _not_applicable([j for j, r in zip(jobs, stored, strict=True) if r is None],
                          workers, kind, address)  # fmt: skip
     keep = [k for k, j in enumerate(jobs) if (j.protagonist, j.adversary) not in na]
@@ -215,6 +214,8 @@ def evaluate(
         workers,
     )
     kept = len(jobs) - len(todo)
+    if kept:
+        log.info("%d of %d jobs read back from %s", kept, len(jobs), parts)
     what = f"evaluate ({kept} of {len(jobs)} cells read back)" if kept else "evaluate"
     bar = progress_display(len(layout.units), what, show=progress)
     try:

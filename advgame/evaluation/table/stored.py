@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from advgame.evaluation.table.batched import LOCKSTEP_EPISODES
-from advgame.evaluation.table.jobs import EvalJob, lockstep_groups
+from advgame.evaluation.table.jobs import EvalJob, lockstep_groups, split_seeds
 from advgame.runner.units import UnitRecord, read_part, unit_key, write_part
 
 __all__ = ["Layout", "adopt_earlier_table", "adopt_groups", "read_jobs", "store_jobs"]
@@ -62,9 +62,7 @@ class Layout:
         units: list[Any] = []
         owners = []
         for job, i in zip(jobs, index, strict=True):
-            for s in range(0, len(job.seeds), per_unit):
-                part = job if per_unit >= len(job.seeds) else dataclasses.replace(
-                    job, seeds=tuple(job.seeds[s : s + per_unit]))  # fmt: skip
+            for part in split_seeds([job], per_unit):
                 units.append(part)
                 owners.append([(i, _rows(part))])
         return cls(units, owners)
@@ -97,12 +95,11 @@ def store_jobs(
     if parts is None:
         return rows
     unit_keys = {rec.key for rec in records}  # a whole job is its own part already
+    job_keys = {i: unit_key(jobs[i]) for i in rows}
     for i, job_rows in rows.items():
-        key = unit_key(jobs[i])
-        if key not in unit_keys:
-            write_part(parts, _job_record(key, job_rows, source[i]))
-    job_keys = {unit_key(jobs[i]) for i in rows}
-    for key in unit_keys - job_keys:
+        if job_keys[i] not in unit_keys:
+            write_part(parts, _job_record(job_keys[i], job_rows, source[i]))
+    for key in unit_keys - set(job_keys.values()):
         (parts / f"{key}.pkl").unlink(missing_ok=True)
     return rows
 
