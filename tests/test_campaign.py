@@ -169,8 +169,13 @@ def test_optimal_grid_overrides_reach_the_search_and_bad_ones_are_refused(
     monkeypatch.setattr(suite, "evaluate_runs", lambda runs, out, **kw: seen.update(kw))
     campaign_module._evaluate(campaign, tmp_path, [], 1, "local", None, False)
     assert seen["optimal_grid"] == grid and seen["exploitability_steps"] == 100
+    search = campaign.search(workers=2)  # what --status counts: the same grid and steps
+    assert search.grid == grid and search.steps == 100 and search.workers == 2
     path.write_text(head)
     assert load_campaign(path).search_grid() is None  # no override: OPTIMAL_GRID
+    assert load_campaign(path).search().grid == OPTIMAL_GRID
+    path.write_text(head.replace("100", "0"))
+    assert load_campaign(path).search() is None  # no exploitability: no search
     for text, words in [
         ("optimal_grid = { 99 = { steps_scale = 2 } }", "OPTIMAL_GRID index"),
         ("optimal_grid = { x = { steps_scale = 2 } }", "OPTIMAL_GRID index"),

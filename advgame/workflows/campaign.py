@@ -286,20 +286,15 @@ def search_status(campaign: Campaign, out: Path, done: Sequence[str]) -> dict[st
     all; what is left is what the evaluate stage still trains. Paths are `run_dir`'s, as the
     evaluate stage gives them: call it with the same `out` from the same folder.
     """
-    if not campaign.exploitability:
+    search = campaign.search()
+    if search is None:
         return None
-    from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch, candidate_jobs
-    from advgame.evaluation.table.columns import default_threat
     from advgame.evaluation.table.protagonists import run_protagonist
     from advgame.runner.units import unit_key
-    from advgame.workflows.suite import observation_agent
+    from advgame.workflows.cells import search_jobs
 
-    threat = campaign.threat or default_threat(campaign.scenario)
     protagonists = {r: run_protagonist(run_dir(out, r))[1] for r in done}
-    grid = campaign.search_grid() or OPTIMAL_GRID
-    search = OptimalSearch(steps=campaign.exploitability, grid=tuple(grid))
-    agent = observation_agent(campaign.scenario, threat)
-    jobs = [j for _, _, j in candidate_jobs(campaign.scenario, threat, agent, protagonists, search)]
+    jobs = search_jobs(campaign.scenario, protagonists, search, threat=campaign.threat)
     parts = out / "results" / "optimal" / "parts"
     have = [(parts / f"{unit_key(j)}.pkl").is_file() for j in jobs]
     return {

@@ -14,9 +14,12 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from advgame.errors import ConfigError
+
+if TYPE_CHECKING:
+    from advgame.evaluation.attacks.optimal import OptimalSearch
 
 __all__ = ["Campaign", "load_campaign"]
 
@@ -132,6 +135,15 @@ class Campaign:
         except ConfigError as exc:
             raise ConfigError(f"evaluate.optimal_grid: {exc}") from None
         return tuple(grid)
+
+    def search(self, workers: int = 1) -> OptimalSearch | None:
+        """The `OptimalSearch` the evaluate stage runs (None: ``exploitability = 0``, no search)."""
+        from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch
+
+        if not self.exploitability:
+            return None
+        grid = self.search_grid() or OPTIMAL_GRID
+        return OptimalSearch(steps=self.exploitability, grid=grid, workers=workers)
 
     def _check_evaluation(self) -> None:
         """The [evaluate] section as the evaluation will read it, hours of training earlier."""

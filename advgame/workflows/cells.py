@@ -1,8 +1,9 @@
 """The cells of a suite's table: its columns and jobs, before anything is played.
 
 `table_jobs` is what `advgame.workflows.suite.evaluate_policies` plays (but for the ``attack
-optimal`` column, which its search decides), so a campaign's ``--status`` can count the cells
-already kept in part files without playing or learning anything.
+optimal`` column, which its search decides) and `search_jobs` the candidates its search
+trains, so a campaign's ``--status`` can count the cells and candidates already kept in part
+files without playing or learning anything.
 """
 
 from __future__ import annotations
@@ -13,9 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from advgame.evaluation import NOMINAL, AdversarySetup, EvalJob, population_jobs
+from advgame.evaluation.attacks.optimal import OptimalSearch, candidate_jobs
 from advgame.evaluation.table.columns import adversary_columns
+from advgame.evaluation.table.threat import default_threat, observation_agent
 
-__all__ = ["SCHEDULE_EPISODES", "table_jobs"]
+__all__ = ["SCHEDULE_EPISODES", "search_jobs", "table_jobs"]
 
 SCHEDULE_EPISODES = 8
 """Episodes per seed in the scheduled column: seed ``s`` plays episodes ``8s + 1`` to ``8s + 8``
@@ -56,3 +59,20 @@ def table_jobs(
         for j in jobs
     ]
     return columns, jobs
+
+
+def search_jobs(
+    scenario: str,
+    protagonists: Mapping[str, Any],
+    search: OptimalSearch,
+    threat: str | None = None,
+) -> list[Any]:
+    """The candidates (`BestResponseJob`) the ``attack optimal`` search trains, in its order.
+
+    What `advgame.workflows.suite.evaluate_policies` trains for `protagonists` with `search`
+    in `threat` (default `advgame.evaluation.table.columns.default_threat`); nothing is trained
+    here.
+    """
+    threat = threat or default_threat(scenario)
+    agent = observation_agent(scenario, threat)
+    return [job for _, _, job in candidate_jobs(scenario, threat, agent, protagonists, search)]
