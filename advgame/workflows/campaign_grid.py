@@ -138,12 +138,9 @@ class Campaign:
 
     def search(self, workers: int = 1) -> OptimalSearch | None:
         """The `OptimalSearch` the evaluate stage runs (None: ``exploitability = 0``, no search)."""
-        from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch
+        from advgame.evaluation.attacks.optimal import optimal_search
 
-        if not self.exploitability:
-            return None
-        grid = self.search_grid() or OPTIMAL_GRID
-        return OptimalSearch(steps=self.exploitability, grid=grid, workers=workers)
+        return optimal_search(self.exploitability, self.search_grid(), workers=workers)
 
     def _check_evaluation(self) -> None:
         """The [evaluate] section as the evaluation will read it, hours of training earlier."""

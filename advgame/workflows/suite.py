@@ -28,9 +28,9 @@ from advgame.evaluation import (
 )
 from advgame.evaluation.attacks.optimal import (
     OPTIMAL,
-    OPTIMAL_GRID,
     OptimalSearch,
     optimal_jobs,
+    optimal_search,
     released_jobs,
     write_exploitability,
 )
@@ -310,10 +310,7 @@ def evaluate_runs(
     if clash:
         raise ConfigError(f"Protagonist names {clash} are taken by runs; name them apart.")
     protagonists.update(extra)
-    search = None
-    if exploitability_steps:
-        grid = tuple(optimal_grid) if optimal_grid else OPTIMAL_GRID
-        search = OptimalSearch(steps=exploitability_steps, grid=grid, workers=workers)
+    search = optimal_search(exploitability_steps, optimal_grid, workers=workers)
     return evaluate_policies(
         sid, protagonists, out, adversaries=adversaries, runs={n: d for n, (_, d) in found.items()},
         last=last, sample=sample, seed=seed, seeds=seeds, episodes=episodes, workers=workers,

@@ -32,6 +32,7 @@ __all__ = [
     "OptimalSearch",
     "candidate_jobs",
     "optimal_jobs",
+    "optimal_search",
     "released_jobs",
     "write_exploitability",
 ]
@@ -133,6 +134,19 @@ class OptimalSearch:
             raise ConfigError(
                 f"OptimalSearch.select_seeds must be an int >= 1, got {self.select_seeds!r}."
             )
+
+
+def optimal_search(
+    steps: int, grid: Sequence[Mapping[str, Any]] | None = None, workers: int = 1
+) -> OptimalSearch | None:
+    """The search of `steps` per candidate over `grid` (None: `OPTIMAL_GRID`); None if `steps` is 0.
+
+    How ``advgame evaluate --exploitability`` and a campaign's evaluate stage (and its
+    ``--status``) read their settings, so both search, and count, the same candidates.
+    """
+    if not steps:
+        return None
+    return OptimalSearch(steps=steps, grid=tuple(grid) if grid else OPTIMAL_GRID, workers=workers)
 
 
 @dataclass
