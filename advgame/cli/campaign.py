@@ -29,6 +29,9 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
     p.add_argument("--runs", metavar="RUN,...",
                    help="train only these runs (METHOD-sSEED, comma-separated), in this order")  # fmt: skip
     p.add_argument("--status", action="store_true", help="print what is done and stop")
+    p.add_argument("--park", action="store_true",
+                   help="park every run in training at its last checkpoint in parked/ (commit "
+                   "it to resume the runs in another checkout) and stop")  # fmt: skip
     p.add_argument("--release", metavar="ZOO", nargs="?", const="", default=None,
                    help="after the table, copy each method's median agent into the zoo "
                    "(default: the repository's zoo/) with its manifest entry")  # fmt: skip
@@ -41,6 +44,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     from advgame.workflows.campaign import (
         done_runs,
         load_campaign,
+        park_campaign,
         run_campaign,
         search_status,
         table_status,
@@ -51,6 +55,12 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(args.file).with_suffix("")
     if args.max_runs is not None and args.max_runs < 0:
         raise ConfigError(f"--max-runs must be >= 0, got {args.max_runs}.")
+    if args.park:
+        parked = park_campaign(campaign, out)
+        for run, iteration in parked.items():
+            print(f"parked {run} at iteration {iteration} in {out / 'parked' / run}")
+        print(f"parked {len(parked)} run(s)" + (f"; commit {out / 'parked'}" if parked else ""))
+        return 0
     if args.status:
         out.mkdir(parents=True, exist_ok=True)
         status = write_status(campaign, out)

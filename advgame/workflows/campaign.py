@@ -36,7 +36,10 @@ varies, and the rest of the section is the variation (a training preset, hyper-p
 `run_campaign` trains every run that is not finished, two (``workers``) at a time as jobs on
 the executor (a local process pool or Ray); a run that was interrupted resumes from its last
 iteration (``runs/``), a finished one is compacted to its last checkpoint and moved to
-``finished/`` in one rename (small enough to commit; never trained again). It then evaluates every finished run's
+``finished/`` in one rename (small enough to commit; never trained again). A run parked in
+``parked/`` (`park_campaign`, `advgame.workflows.park`: how a run longer than a session crosses
+to a fresh checkout through git) is rebuilt in ``runs/`` first when it is further on than the
+copy there, and its parked copy deleted once it is finished. It then evaluates every finished run's
 final protagonist in one table (finished evaluation units are read back, not replayed) and
 writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-attacks
 return, the interquartile range and the 95 % interval over seeds of its natural and
@@ -63,6 +66,7 @@ __all__ = [
     "campaign_table",
     "done_runs",
     "load_campaign",
+    "park_campaign",
     "run_campaign",
     "search_status",
 ]
@@ -100,7 +104,10 @@ class _StatusEach:
 
 def _train_unit(unit: tuple[Any, str, str, bool | str]) -> str:
     """Train or resume one run to its end, then keep it compact in ``finished/`` (a worker)."""
+    import shutil
+
     from advgame.training import resume, train
+    from advgame.workflows.park import PARKED
 
     config, partial, finished, show = unit
     path = Path(partial)
@@ -111,6 +118,7 @@ def _train_unit(unit: tuple[Any, str, str, bool | str]) -> str:
     compact(path)
     Path(finished).parent.mkdir(parents=True, exist_ok=True)
     path.rename(finished)  # one rename: ``finished/`` never holds half a run
+    shutil.rmtree(Path(finished).parent.parent / PARKED / path.name, ignore_errors=True)
     return finished
 
 
@@ -197,6 +205,7 @@ def run_campaign(
             raise ConfigError(
                 f"No run {unknown[0]!r} in the campaign; its runs: {', '.join(campaign.runs())}."
             )
+        _unpark(out, names)
         todo = [r for r in names if _progress(run_dir(out, r)) < campaign.config(r).iterations]
         todo = todo[:max_runs] if max_runs is not None else todo
         write_status(campaign, out, training=todo)
@@ -220,6 +229,39 @@ def run_campaign(
     path = campaign_table(campaign, out, out / FINISHED)
     write_status(campaign, out)
     return path
+
+
+def _unpark(out: Path, names: Sequence[str]) -> None:
+    """Rebuild in ``runs/`` each run whose parked copy is further on (drop finished ones')."""
+    import shutil
+
+    from advgame.workflows.park import PARKED, parked_iteration, unpark_run
+
+    for r in names:
+        parked = out / PARKED / r
+        if (out / FINISHED / r).exists():
+            shutil.rmtree(parked, ignore_errors=True)
+        elif parked_iteration(parked) > _progress(out / "runs" / r):
+            log.info("campaign: %s resumes from its parked copy", r)
+            unpark_run(parked, out / "runs" / r)
+
+
+def park_campaign(campaign: Campaign, out: str | Path) -> dict[str, int]:
+    """Park every run of the campaign in training (``runs/``, not finished) in ``parked/``.
+
+    Returns the iteration each was parked at. Safe while they train: each is parked at its
+    last checkpoint. Commit ``parked/`` to carry them to another checkout, where the train
+    stage resumes them (`advgame.workflows.park`).
+    """
+    from advgame.workflows.park import PARKED, park_run
+
+    out = Path(out)
+    parked = {}
+    for r in campaign.runs():
+        run = out / "runs" / r
+        if not (out / FINISHED / r).exists() and (run / "state.json").is_file():
+            parked[r] = park_run(run, out / PARKED / r)
+    return parked
 
 
 def _evaluate(
@@ -253,9 +295,13 @@ def _evaluate(
 
 def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) -> dict[str, Any]:
     """Write ``status.json``: each run's state and iteration, and the evaluation's."""
+    from advgame.workflows.park import PARKED, parked_iteration
+
     runs = {}
     for r in campaign.runs():
         it, of = _progress(run_dir(out, r)), campaign.config(r).iterations
+        if it < of:  # a run parked further on than runs/ holds resumes from there
+            it = max(it, parked_iteration(out / PARKED / r))
         state = (
             "done"
             if it >= of
