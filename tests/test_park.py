@@ -130,6 +130,13 @@ def test_a_parked_run_resumes_in_a_fresh_checkout_as_the_run_itself_would(
     assert sorted(p.name for p in (parked / "checkpoints").iterdir()) == ["iter_0002"]
 
     shutil.rmtree(out / "runs")  # a fresh checkout: only what git carries
+    manifest = parked / "checkpoints" / "iter_0002" / "protagonist_replay.json"
+    good = manifest.read_text()
+    manifest.write_text(good[: len(good) // 2])  # a damaged file is one clear line, no traceback
+    assert main(["campaign", str(spec), "--stage", "train", "--no-progress"]) == 2
+    assert "replay manifest" in capsys.readouterr().err
+    assert not (out / "runs" / "sac-s0").exists()
+    manifest.write_text(good)
     assert main(["campaign", str(spec), "--status"]) == 0
     assert "sac-s0: partial (2/3)" in capsys.readouterr().out
     assert main(["campaign", str(spec), "--stage", "train", "--no-progress"]) == 0

@@ -39,6 +39,7 @@ _TOP = ("config.json", "population.json", "progress.csv")
 """A run's top-level files a resume reads (``state.json`` is written after them)."""
 _REPLAY = "_replay.pkl"
 _MANIFEST = "_replay.json"
+_KEYS = ("format", "filled", "arrays", "chunks", "buffer")
 
 
 def parked_iteration(folder: Path) -> int:
@@ -83,7 +84,7 @@ def _previous_manifest(parked: Path, agent: str) -> dict[str, Any] | None:
         return None
     state = read_json(parked / "state.json", "parked run state", ("checkpoint",))
     path = parked / state["checkpoint"] / f"{agent}{_MANIFEST}"
-    return json.loads(path.read_text()) if path.is_file() else None
+    return read_json(path, "replay manifest", _KEYS) if path.is_file() else None
 
 
 def park_run(run: Path, parked: Path, attempts: int = 3) -> int:
@@ -171,7 +172,8 @@ def unpark_run(parked: Path, run: Path) -> int:
     shutil.copytree(parked, partial, ignore=shutil.ignore_patterns("replay", "*.partial"))
     for manifest in sorted(partial.glob(f"checkpoints/*/*{_MANIFEST}")):
         agent = manifest.name[: -len(_MANIFEST)]
-        buffer = load_buffer(json.loads(manifest.read_text()), parked / "replay" / agent)
+        data = read_json(manifest, "replay manifest", _KEYS)
+        buffer = load_buffer(data, parked / "replay" / agent)
         save_to_pkl(manifest.with_name(f"{agent}{_REPLAY}"), buffer)
         manifest.unlink()
     shutil.rmtree(run, ignore_errors=True)
