@@ -242,7 +242,7 @@ def test_core_wheel_alone_runs_in_a_fresh_venv(tmp_path: Path) -> None:
     listing = run("list", "LunarLander-v3", "Hopper-v5").splitlines()
     assert "advgame[box2d]" in listing[0] and "needs" not in listing[1]
     zoo = run("zoo", "list").splitlines()
-    assert len(zoo) == 1 + 19 and zoo[1].startswith("hopper/"), zoo  # from the installed package
+    assert len(zoo) == 1 + 21 and zoo[1].startswith("hopper/"), zoo  # from the installed package
     report = run("evaluate", "--zoo", "hopper/ppo", "--seeds", "1", "--adversaries", "nominal",
                  "--budgets", "--out", "eval")  # fmt: skip
     assert "report:" in report and (work / "eval" / "payoff.csv").is_file()
