@@ -60,17 +60,6 @@ def _norms(vectors: np.ndarray) -> np.ndarray:
     return np.array([np.linalg.norm(np.array(v), ord=2) for v in vectors])
 
 
-def _sum_squares(values: np.ndarray) -> np.ndarray:
-    """``np.sum(np.square(row))`` of each row (of any shape), summed as the single env sums it.
-
-    One row at a time, each squared into a fresh array as the single env squares its action:
-    NumPy's reduction along an axis of a stacked array, or of a row that is not aligned as a
-    fresh array is, need not add in the single env's order (as a BLAS dot does, `_norms`).
-    """
-    sums = [np.sum(np.square(row)) for row in values]
-    return np.array(sums, dtype=values.dtype) if sums else np.zeros(0, dtype=values.dtype)
-
-
 def _times(weight: float, values: np.ndarray) -> np.ndarray:
     """``weight * values`` with each row promoted as the single env's scalar product is.
 
@@ -83,7 +72,7 @@ def _times(weight: float, values: np.ndarray) -> np.ndarray:
 
 
 def _ctrl_cost(weight: float, actions: np.ndarray) -> np.ndarray:
-    return _times(weight, _sum_squares(actions))
+    return _times(weight, np.sum(np.square(actions), axis=1))
 
 
 def _x(g: Stacked, env: Any) -> np.ndarray:
@@ -184,7 +173,7 @@ def _ant(g: Stacked, env: Any, before: Any, act: np.ndarray, dt: np.ndarray) -> 
     forward = v[:, 0] * env._forward_reward_weight
     survive = healthy * env._healthy_reward
     ctrl = _ctrl_cost(env._ctrl_cost_weight, act)
-    contact = env._contact_cost_weight * _sum_squares(forces)
+    contact = env._contact_cost_weight * np.sum(np.square(forces).reshape(len(qpos), -1), axis=1)
     info = {
         "x_position": qpos[:, 0],
         "y_position": qpos[:, 1],
@@ -213,6 +202,10 @@ def _humanoid_obs(g: Stacked, env: Any) -> np.ndarray:
     if env._include_cfrc_ext_in_observation is True:
         parts.append(g.cfrc_ext[:, 1:].reshape(n, -1))
     return np.concatenate(parts, axis=1)
+
+
+def _sum_squares(values: np.ndarray) -> np.ndarray:
+    return np.sum(np.square(values).reshape(len(values), -1), axis=1)
 
 
 def _humanoid(g: Stacked, env: Any, before: Any, act: np.ndarray, dt: np.ndarray) -> Outcome:
@@ -303,7 +296,7 @@ def _reacher(g: Stacked, env: Any, before: Any, act: np.ndarray, dt: np.ndarray)
         axis=1,
     )
     dist = -_norms(vec) * env._reward_dist_weight
-    ctrl = _times(env._reward_control_weight, -_sum_squares(act))
+    ctrl = _times(env._reward_control_weight, -np.sum(np.square(act), axis=1))
     info = {"reward_dist": dist, "reward_ctrl": ctrl}
     return obs, dist + ctrl, np.zeros(len(qpos), bool), info
 
@@ -313,7 +306,7 @@ def _pusher(g: Stacked, env: Any, before: Any, act: np.ndarray, dt: np.ndarray) 
     obs = np.concatenate((g.qpos[:, :7], g.qvel[:, :7], tips, obj, goal), axis=1)
     near = -_norms(obj - tips) * env._reward_near_weight
     dist = -_norms(obj - goal) * env._reward_dist_weight
-    ctrl = _times(env._reward_control_weight, -_sum_squares(act))
+    ctrl = _times(env._reward_control_weight, -np.sum(np.square(act), axis=1))
     info = {"reward_dist": dist, "reward_ctrl": ctrl, "reward_near": near}
     return obs, dist + ctrl + near, np.zeros(len(obs), bool), info
 
