@@ -55,6 +55,15 @@ def row_arrays(buffer: Any) -> dict[str, np.ndarray]:
     return found
 
 
+def _put(buffer: Any, name: str, array: np.ndarray) -> None:
+    """Set the per-row array `name` of `buffer` (``row_arrays``' naming, dict members too)."""
+    attr, _, key = name.partition(".")
+    if key and isinstance(getattr(buffer, attr, None), dict):
+        getattr(buffer, attr)[key] = array
+    else:
+        setattr(buffer, name, array)
+
+
 def _filled(buffer: Any) -> int:
     return int(buffer.buffer_size) if buffer.full else int(buffer.pos)
 
@@ -137,15 +146,11 @@ def store_buffer(buffer: Any, folder: Path, previous: dict[str, Any] | None = No
         name = _write_chunk(arrays, start, filled, folder, digest)
         chunks.append({"start": start, "end": filled, "file": name, "digest": digest})
     skeleton = copy.copy(buffer)
+    for attr, value in vars(buffer).items():  # its own dicts, so emptying leaves `buffer` whole
+        if isinstance(value, dict):
+            setattr(skeleton, attr, dict(value))
     for name, array in arrays.items():
-        empty = np.empty((0, *array.shape[1:]), dtype=array.dtype)
-        if "." in name and isinstance(getattr(buffer, name.split(".")[0], None), dict):
-            attr, key = name.split(".", 1)
-            if getattr(skeleton, attr) is getattr(buffer, attr):
-                setattr(skeleton, attr, dict(getattr(buffer, attr)))
-            getattr(skeleton, attr)[key] = empty
-        else:
-            setattr(skeleton, name, empty)
+        _put(skeleton, name, np.empty((0, *array.shape[1:]), dtype=array.dtype))
     return {
         "format": FORMAT,
         "filled": filled,
@@ -186,9 +191,5 @@ def load_buffer(manifest: dict[str, Any], folder: Path) -> Any:
             f"Replay chunks in {folder} hold {covered} rows, the buffer {manifest['filled']}. {fix}"
         )
     for name, array in full.items():
-        attr, _, key = name.partition(".")
-        if key and isinstance(getattr(buffer, attr, None), dict):
-            getattr(buffer, attr)[key] = array
-        else:
-            setattr(buffer, name, array)
+        _put(buffer, name, array)
     return buffer

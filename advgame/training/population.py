@@ -175,6 +175,13 @@ class Population:
             raise ConfigError(f"The population already has a member {member.id!r}.")
         self.members.append(member)
 
+    def drop_missing(self) -> None:
+        """Keep only the members whose model file remains.
+
+        A run compacted or parked to its last checkpoints keeps the members those hold.
+        """
+        self.members = [m for m in self.members if _file_remains(m.spec)]
+
     def of(self, agent: str, learned_only: bool = False) -> list[Member]:
         """Members playing `agent`, oldest first."""
         return [m for m in self.members if m.agent == agent and (m.learned or not learned_only)]
@@ -210,3 +217,9 @@ class Population:
         base = Path(path).parent
         with reading(path, "population file", fix):
             return cls([Member.from_dict(d, base) for d in data])
+
+
+def _file_remains(spec: Any) -> bool:
+    """Whether `spec`'s model file (its ``path``, if it has one) exists."""
+    path = getattr(spec, "path", None)
+    return not path or Path(path).exists()

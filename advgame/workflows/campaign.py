@@ -104,10 +104,7 @@ class _StatusEach:
 
 def _train_unit(unit: tuple[Any, str, str, bool | str]) -> str:
     """Train or resume one run to its end, then keep it compact in ``finished/`` (a worker)."""
-    import shutil
-
     from advgame.training import resume, train
-    from advgame.workflows.park import PARKED
 
     config, partial, finished, show = unit
     path = Path(partial)
@@ -118,7 +115,6 @@ def _train_unit(unit: tuple[Any, str, str, bool | str]) -> str:
     compact(path)
     Path(finished).parent.mkdir(parents=True, exist_ok=True)
     path.rename(finished)  # one rename: ``finished/`` never holds half a run
-    shutil.rmtree(Path(finished).parent.parent / PARKED / path.name, ignore_errors=True)
     return finished
 
 
@@ -155,12 +151,8 @@ def compact(run: Path) -> None:
     for replay in last.glob("*_replay.pkl"):
         replay.unlink()
     population = Population.load(run / "population.json")
-    population.members = [m for m in population if _files_exist(m.spec)]
+    population.drop_missing()
     population.save(run / "population.json")
-
-
-def _files_exist(spec: Any) -> bool:
-    return all(Path(getattr(spec, f)).exists() for f in ("path",) if getattr(spec, f, None))
 
 
 def run_campaign(
@@ -219,6 +211,7 @@ def run_campaign(
             run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
                       address=address, max_retries=1,
                       progress=_StatusEach(campaign, out, todo, progress))  # fmt: skip
+            _unpark(out, todo)  # the runs that finished drop their parked copies
     status = write_status(campaign, out)
     if stage == "train":
         return out / "status.json"

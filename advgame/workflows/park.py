@@ -129,15 +129,11 @@ def _park(run: Path, parked: Path) -> int:
         if (run / name).is_file():
             write_atomic(parked / name, (run / name).read_bytes())
     population = Population.load(parked / "population.json")  # paths now under `parked`
-    population.members = [m for m in population if _files_exist(m.spec)]
+    population.drop_missing()
     population.save(parked / "population.json")
     write_atomic(parked / "state.json", (run / "state.json").read_bytes())
     _tidy(parked, keep, manifests)
     return int(state["iteration"])
-
-
-def _files_exist(spec: Any) -> bool:
-    return all(Path(v).exists() for f in ("path", "normalizer") if (v := getattr(spec, f, None)))
 
 
 def _tidy(parked: Path, keep: list[str], manifests: dict[str, dict[str, Any]]) -> None:
