@@ -28,7 +28,9 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
     p.add_argument("--max-runs", type=int, metavar="K", help="train at most K unfinished runs now")
     p.add_argument("--runs", metavar="RUN,...",
                    help="train only these runs (METHOD-sSEED, comma-separated), in this order")  # fmt: skip
-    p.add_argument("--status", action="store_true", help="print what is done and stop")
+    p.add_argument("--status", action="store_true",
+                   help="print what is done, draw the training curves so far (progress.png) "
+                   "and stop")  # fmt: skip
     p.add_argument("--park", action="store_true",
                    help="park every run in training at its last checkpoint in parked/ (commit "
                    "it to resume the runs in another checkout) and stop")  # fmt: skip
@@ -45,6 +47,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         done_runs,
         load_campaign,
         park_campaign,
+        progress_curves,
         run_campaign,
         search_status,
         table_status,
@@ -78,6 +81,10 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         print(
             f"table (finished runs, without the optimal column): {cells['played']}/"
             f"{cells['cells']} cells played"
+        )
+        curves = progress_curves(campaign, out)
+        print(
+            f"training curves so far: {curves}" if curves else "training curves: no run has trained"
         )
         return 0
     path = run_campaign(

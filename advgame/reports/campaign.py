@@ -9,7 +9,7 @@ method the median agent and the spread over seeds, a cost table for safe campaig
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -17,7 +17,7 @@ import numpy as np
 
 from advgame.errors import FileFormatError
 
-__all__ = ["CampaignGrid", "campaign_table"]
+__all__ = ["CampaignGrid", "campaign_table", "method_curves"]
 
 
 class CampaignGrid(Protocol):
@@ -93,18 +93,33 @@ CURVES = "curves.png"
 
 def _curves(campaign: CampaignGrid, out: Path, finished: Path) -> Path | None:
     """Write ``curves.png``: return (and cost, for safe campaigns) over steps, per method."""
+    files = {
+        r: finished / r / "progress.csv" for m in campaign.methods for r in campaign.method_runs(m)
+    }
+    return method_curves(campaign, files, out / CURVES)
+
+
+def method_curves(
+    campaign: CampaignGrid, files: Mapping[str, Path], path: Path, ragged: bool = False
+) -> Path | None:
+    """Draw each method's training return (and cost, for safe campaigns) over steps; save it.
+
+    `files` maps runs (``METHOD-sSEED``) to their ``progress.csv``; a method's line is the mean
+    over its runs, its band their minimum and maximum. Runs are cut to the shortest one's
+    points, or with `ragged` (runs still in training) each point is over the runs that have
+    reached it (`advgame.reports.plots.plot_method_curves`). None when nothing is drawn.
+    """
     from advgame.reports.plots import plot_method_curves
 
     groups = {
-        m: [finished / r / "progress.csv" for r in campaign.method_runs(m)]
-        for m in campaign.methods
+        m: [files[r] for r in campaign.method_runs(m) if r in files] for m in campaign.methods
     }
     columns = ["protagonist_phase_true_return"]
     lines = {}
     if campaign.cost_limit is not None:
         columns.append("protagonist_phase_true_cost")
         lines["protagonist_phase_true_cost"] = float(campaign.cost_limit)
-    return plot_method_curves(groups, out / CURVES, columns, lines=lines)
+    return plot_method_curves(groups, path, columns, lines=lines, ragged=ragged)
 
 
 def _cost_md(campaign: CampaignGrid, cells: list[dict[str, Any]]) -> str:

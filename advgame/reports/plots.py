@@ -22,6 +22,7 @@ from advgame.evaluation.table.payoff import PayoffTable, ci95
 
 __all__ = [
     "X_COLUMNS",
+    "method_series",
     "plot_budget_curve",
     "plot_heatmap",
     "plot_method_curves",
@@ -200,38 +201,68 @@ def plot_training_curves(
     return _save(fig, path)
 
 
-def plot_method_curves(
+def _padded(values: np.ndarray, n: int) -> np.ndarray:
+    """`values` cut or nan-padded to length `n`."""
+    return np.pad(values[:n], (0, n - len(values[:n])), constant_values=np.nan)
+
+
+def method_series(
     groups: Mapping[str, Sequence[str | Path]],
-    path: str | Path,
     columns: Sequence[str],
     x: str = "protagonist_steps",
-    lines: Mapping[str, float] | None = None,
-) -> Path | None:
-    """Draw each group's (method's) mean training curve over its runs, with their min-max band.
+    ragged: bool = False,
+) -> dict[str, dict[str, np.ndarray]]:
+    """Each group's runs stacked per column: ``{label: {column: array [runs, points]}}``.
 
-    `groups` maps a label to the progress CSVs of its runs (seeds); one panel per column of
-    `columns`; runs are cut to the shortest one's rows (x read from the first). `lines` draws a
-    dashed horizontal line on a column's panel (a cost limit). Runs without the columns are skipped;
-    returns None (and writes nothing) if nothing is left.
+    `groups` maps a label to progress CSVs (missing files, and runs without `x` or one of
+    `columns`, are skipped; so is a group left empty). Runs are cut to the shortest one's
+    rows, or with `ragged` padded with nan to the longest one's: the curves of runs still in
+    training, each point over the runs that have reached it.
     """
     data: dict[str, dict[str, np.ndarray]] = {}
     for label, paths in groups.items():
         runs = [_read_progress(p) for p in paths if Path(p).is_file()]
         runs = [r for r in runs if x in r and all(c in r for c in columns)]
         if not runs:
-            log.warning("no progress CSV of %r has %s; skipped", label, [x, *columns])
+            if paths:  # a group with no runs yet (a campaign's pending method) is no surprise
+                log.warning("no progress CSV of %r has %s; skipped", label, [x, *columns])
             continue
-        n = min(len(r[x]) for r in runs)
-        data[label] = {c: np.stack([r[c][:n] for r in runs]) for c in (x, *columns)}
+        lengths = [len(r[x]) for r in runs]
+        n = max(lengths) if ragged else min(lengths)
+        data[label] = {c: np.stack([_padded(r[c], n) for r in runs]) for c in (x, *columns)}
+    return data
+
+
+def plot_method_curves(
+    groups: Mapping[str, Sequence[str | Path]],
+    path: str | Path,
+    columns: Sequence[str],
+    x: str = "protagonist_steps",
+    lines: Mapping[str, float] | None = None,
+    ragged: bool = False,
+) -> Path | None:
+    """Draw each group's (method's) mean training curve over its runs, with their min-max band.
+
+    `groups` maps a label to the progress CSVs of its runs (seeds); one panel per column of
+    `columns`; runs are cut to the shortest one's rows, or with `ragged` each point is over the
+    runs that have reached it (`method_series`). `lines` draws a dashed horizontal line on a
+    column's panel (a cost limit). Runs without the columns are skipped; returns None (and
+    writes nothing) if nothing is left.
+    """
+    import warnings
+
+    data = method_series(groups, columns, x, ragged)
     if not data:
         return None
     fig, axes = _panel_column(len(columns), 2.8)
     for ax, col in zip(axes, columns, strict=True):
         for label, d in data.items():
-            xs, ys = d[x][0], d[col]
-            (line,) = ax.plot(xs, np.nanmean(ys, axis=0), label=f"{label} ({len(ys)})")
-            ax.fill_between(xs, np.nanmin(ys, axis=0), np.nanmax(ys, axis=0),
-                            color=line.get_color(), alpha=0.2)  # fmt: skip
+            xs, ys = np.nanmax(d[x], axis=0), d[col]
+            with warnings.catch_warnings():  # a point no run has a value at stays blank
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mean, low, high = (f(ys, axis=0) for f in (np.nanmean, np.nanmin, np.nanmax))
+            (line,) = ax.plot(xs, mean, label=f"{label} ({len(ys)})")
+            ax.fill_between(xs, low, high, color=line.get_color(), alpha=0.2)
         if lines and col in lines:
             ax.axhline(lines[col], color="k", linestyle="--", linewidth=1, label="limit")
         ax.set_xlabel(x)

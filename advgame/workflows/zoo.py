@@ -268,7 +268,7 @@ def release_campaign(
     import csv
 
     from advgame.evaluation import run_protagonist
-    from advgame.workflows.campaign import run_dir
+    from advgame.workflows.campaign_status import run_dir
 
     out = Path(out)
     table = out / "campaign.csv"

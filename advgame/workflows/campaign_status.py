@@ -1,0 +1,179 @@
+"""Where a campaign stands: its runs' folders, ``status.json``, what is left, the curves so far.
+
+`advgame.workflows.campaign.run_campaign` keeps ``status.json`` current with `write_status`;
+``advgame campaign FILE --status`` prints it, counts what the evaluate stage has left
+(`search_status`, `table_status`) and draws every method's training curves so far
+(`progress_curves`), runs in training and parked ones included.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from advgame.core.config import read_json, write_atomic
+from advgame.workflows.campaign_grid import Campaign
+
+__all__ = [
+    "FINISHED",
+    "PROGRESS_CURVES",
+    "done_runs",
+    "progress",
+    "progress_curves",
+    "progress_files",
+    "run_dir",
+    "search_status",
+    "table_status",
+    "write_status",
+]
+
+FINISHED = "finished"
+"""The campaign's folder of finished, compacted runs (``runs/`` holds those in training)."""
+
+
+def run_dir(out: Path, run: str) -> Path:
+    """Where run `run` of the campaign in `out` is: ``finished/RUN`` once done, else ``runs/RUN``."""
+    done = out / FINISHED / run
+    return done if done.exists() else out / "runs" / run
+
+
+def progress(run: Path) -> int:
+    """The last finished iteration of the run in folder `run` (0: none)."""
+    if not (run / "state.json").exists():
+        return 0
+    return int(read_json(run / "state.json", "run state", ("iteration",))["iteration"])
+
+
+def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) -> dict[str, Any]:
+    """Write ``status.json``: each run's state and iteration, and the evaluation's."""
+    from advgame.workflows.park import PARKED, parked_iteration
+
+    runs = {}
+    for r in campaign.runs():
+        it, of = progress(run_dir(out, r)), campaign.config(r).iterations
+        if it < of:  # a run parked further on than runs/ holds resumes from there
+            it = max(it, parked_iteration(out / PARKED / r))
+        state = (
+            "done"
+            if it >= of
+            else ("training" if r in training else "partial" if it else "pending")
+        )
+        runs[r] = {"state": state, "iteration": it, "of": of}
+    table = out / "campaign.md"
+    status = {
+        "scenario": campaign.scenario,
+        "runs": runs,
+        "evaluated": sorted(_evaluated(out)),
+        "table": table.name if table.exists() else None,
+    }
+    write_atomic(out / "status.json", json.dumps(status, indent=2) + "\n")
+    return status
+
+
+def done_runs(status: dict[str, Any]) -> list[str]:
+    """The finished runs of a `write_status` result, in the campaign's order."""
+    return [r for r, s in status["runs"].items() if s["state"] == "done"]
+
+
+def search_status(campaign: Campaign, out: Path, done: Sequence[str]) -> dict[str, int] | None:
+    """How far the optimal attack's search has come for the finished runs `done` (None: no search).
+
+    ``{"trained", "candidates", "trained_steps", "steps"}``: candidates whose part file exists
+    (`advgame.evaluation.attacks.optimal.candidate_jobs`), and their adversary steps, out of
+    all; what is left is what the evaluate stage still trains. Paths are `run_dir`'s, as the
+    evaluate stage gives them: call it with the same `out` from the same folder.
+    """
+    search = campaign.search()
+    if search is None:
+        return None
+    from advgame.evaluation.table.protagonists import run_protagonist
+    from advgame.runner.units import unit_key
+    from advgame.workflows.cells import search_jobs
+
+    protagonists = {r: run_protagonist(run_dir(out, r))[1] for r in done}
+    jobs = search_jobs(campaign.scenario, protagonists, search, threat=campaign.threat)
+    parts = out / "results" / "optimal" / "parts"
+    have = [(parts / f"{unit_key(j)}.pkl").is_file() for j in jobs]
+    return {
+        "trained": sum(have),
+        "candidates": len(jobs),
+        "trained_steps": sum(j.steps for j, h in zip(jobs, have, strict=True) if h),
+        "steps": sum(j.steps for j in jobs),
+    }
+
+
+def table_status(campaign: Campaign, out: Path, done: Sequence[str]) -> dict[str, int]:
+    """How many cells of the evaluate stage's table for the finished runs `done` are played.
+
+    ``{"played", "cells"}``: cells kept in part files (`advgame.evaluation.table.stored`) out
+    of the table's cells, without the ``attack optimal`` column (its cells depend on the
+    search, `search_status`). Nothing is played or learned; call it as `search_status`.
+    """
+    from advgame.evaluation.table.protagonists import run_protagonist
+    from advgame.evaluation.table.stored import read_jobs
+    from advgame.workflows.cells import table_jobs
+
+    runs = {r: run_dir(out, r) for r in done}
+    if not runs:
+        return {"played": 0, "cells": 0}
+    protagonists = {r: run_protagonist(d)[1] for r, d in runs.items()}
+    _, jobs = table_jobs(campaign.scenario, protagonists, campaign.adversaries, runs=runs,
+                         seeds=campaign.eval_seeds, threat=campaign.threat)  # fmt: skip
+    stored = read_jobs(jobs, out / "results" / "parts")
+    return {"played": sum(r is not None for r in stored), "cells": len(jobs)}
+
+
+def _evaluated(out: Path) -> set[str]:
+    """Runs that have rows in the campaign's payoff table."""
+    path = out / "results" / "payoff.csv"
+    if not path.exists():
+        return set()
+    from advgame.evaluation import PayoffTable
+
+    return set(PayoffTable.from_csv(path).protagonists)
+
+
+PROGRESS_CURVES = "progress.png"
+"""The figure `progress_curves` writes in a campaign's folder (``campaign.md`` has ``curves.png``)."""
+
+
+def _rows(path: Path) -> int:
+    """Data rows of a progress CSV (0: none, or no file)."""
+    if not path.is_file():
+        return 0
+    with path.open() as f:
+        return max(sum(1 for line in f if line.strip()) - 1, 0)
+
+
+def progress_files(campaign: Campaign, out: Path) -> dict[str, Path]:
+    """Each run's furthest ``progress.csv``: of ``finished/``, ``runs/`` and ``parked/``.
+
+    Runs that have not trained an iteration anywhere are left out.
+    """
+    from advgame.workflows.park import PARKED
+
+    files = {}
+    for r in campaign.runs():
+        copies = [out / where / r / "progress.csv" for where in (FINISHED, "runs", PARKED)]
+        furthest = max(copies, key=_rows)  # the first of equals: finished, then runs/
+        if _rows(furthest):
+            files[r] = furthest
+    return files
+
+
+def progress_curves(campaign: Campaign, out: Path) -> Path | None:
+    """Write ``progress.png`` in `out`: each method's training curves so far; return its path.
+
+    Every run that has trained counts, finished, in training or parked (`progress_files`); a
+    method's line is the mean over the runs that have reached each point, its band their
+    minimum and maximum, so a multi-session campaign's figure can be read while it trains.
+    None (and nothing written) when no run has trained an iteration.
+    """
+    from advgame.reports.campaign import method_curves
+
+    files = progress_files(campaign, out)
+    if not files:
+        return None
+    return method_curves(campaign, files, out / PROGRESS_CURVES, ragged=True)

@@ -1,0 +1,95 @@
+"""The training curves of a campaign while it trains: every copy of a run counts, the furthest wins."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from advgame.cli import main
+from advgame.reports.plots import method_series
+from advgame.workflows.campaign import load_campaign
+from advgame.workflows.campaign_status import progress_curves, progress_files
+
+SPEC = """
+scenario = "Hopper-v5"
+methods = ["sac", "ompo"]
+seeds = [0, 1, 2]
+
+[train]
+iterations = 30
+protagonist_steps = 10000
+eval_episodes = 0
+"""
+
+COLUMNS = ["protagonist_steps", "protagonist_phase_true_return"]
+
+
+def _progress(folder: Path, returns: list[float], iteration: int | None = None) -> None:
+    """A run folder with a progress CSV of `returns`, one row per iteration."""
+    folder.mkdir(parents=True)
+    rows = [",".join(COLUMNS)]
+    rows += [f"{10000 * (i + 1)},{r}" for i, r in enumerate(returns)]
+    (folder / "progress.csv").write_text("\n".join(rows) + "\n")
+    n = len(returns) if iteration is None else iteration
+    (folder / "state.json").write_text(json.dumps({"iteration": n}))
+
+
+def test_method_series_cuts_to_the_shortest_run_or_pads_to_the_longest(tmp_path: Path) -> None:
+    _progress(tmp_path / "a", [1.0, 2.0, 3.0])
+    _progress(tmp_path / "b", [5.0, 6.0])
+    groups = {"m": [tmp_path / "a" / "progress.csv", tmp_path / "b" / "progress.csv"]}
+
+    cut = method_series(groups, ["protagonist_phase_true_return"])["m"]
+    np.testing.assert_array_equal(cut["protagonist_phase_true_return"], [[1, 2], [5, 6]])
+
+    ragged = method_series(groups, ["protagonist_phase_true_return"], ragged=True)["m"]
+    np.testing.assert_array_equal(
+        ragged["protagonist_phase_true_return"], [[1, 2, 3], [5, 6, np.nan]]
+    )
+    np.testing.assert_array_equal(np.nanmax(ragged["protagonist_steps"], axis=0), [1e4, 2e4, 3e4])
+    # the mean at each point is over the runs that have reached it
+    np.testing.assert_array_equal(
+        np.nanmean(ragged["protagonist_phase_true_return"], axis=0), [3, 4, 3]
+    )
+
+
+def test_each_run_is_read_from_its_furthest_copy(tmp_path: Path) -> None:
+    spec = tmp_path / "grid.toml"
+    spec.write_text(SPEC)
+    campaign = load_campaign(spec)
+    out = tmp_path / "grid"
+    _progress(out / "finished" / "sac-s0", [float(i) for i in range(30)])
+    _progress(out / "runs" / "ompo-s0", [1.0, 2.0, 3.0])  # runs/ behind its parked copy
+    _progress(out / "parked" / "ompo-s0", [1.0, 2.0, 3.0, 4.0, 5.0])
+    _progress(out / "runs" / "ompo-s1", [7.0, 8.0])  # in training, never parked
+    (out / "runs" / "ompo-s2").mkdir(parents=True)  # started, no iteration yet
+
+    files = progress_files(campaign, out)
+    assert files == {
+        "sac-s0": out / "finished" / "sac-s0" / "progress.csv",
+        "ompo-s0": out / "parked" / "ompo-s0" / "progress.csv",
+        "ompo-s1": out / "runs" / "ompo-s1" / "progress.csv",
+    }
+    path = progress_curves(campaign, out)
+    assert path == out / "progress.png" and path.stat().st_size > 1000
+
+
+def test_status_draws_the_curves_so_far_or_says_nothing_has_trained(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    spec = tmp_path / "grid.toml"
+    spec.write_text(SPEC)
+    out = tmp_path / "grid"
+    assert main(["campaign", str(spec), "--status"]) == 0
+    assert "training curves: no run has trained" in capsys.readouterr().out
+    assert not (out / "progress.png").exists()
+
+    _progress(out / "parked" / "ompo-s1", [1.0, 2.0], iteration=2)
+    assert main(["campaign", str(spec), "--status"]) == 0
+    text = capsys.readouterr().out
+    assert "ompo-s1: partial (2/30)" in text
+    assert f"training curves so far: {out / 'progress.png'}" in text
+    assert (out / "progress.png").is_file()
