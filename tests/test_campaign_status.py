@@ -11,7 +11,12 @@ import pytest
 from advgame.cli import main
 from advgame.reports.plots import method_series
 from advgame.workflows.campaign import load_campaign
-from advgame.workflows.campaign_status import progress_curves, progress_files
+from advgame.workflows.campaign_status import (
+    progress_curves,
+    progress_files,
+    seconds_left,
+    write_status,
+)
 
 SPEC = """
 scenario = "Hopper-v5"
@@ -24,14 +29,16 @@ protagonist_steps = 10000
 eval_episodes = 0
 """
 
-COLUMNS = ["protagonist_steps", "protagonist_phase_true_return"]
+COLUMNS = ["protagonist_steps", "protagonist_phase_true_return", "wall_s"]
 
 
-def _progress(folder: Path, returns: list[float], iteration: int | None = None) -> None:
-    """A run folder with a progress CSV of `returns`, one row per iteration."""
+def _progress(
+    folder: Path, returns: list[float], iteration: int | None = None, wall: float = 100.0
+) -> None:
+    """A run folder with a progress CSV of `returns`, one row per iteration (`wall` + i s each)."""
     folder.mkdir(parents=True)
     rows = [",".join(COLUMNS)]
-    rows += [f"{10000 * (i + 1)},{r}" for i, r in enumerate(returns)]
+    rows += [f"{10000 * (i + 1)},{r},{wall + i}" for i, r in enumerate(returns)]
     (folder / "progress.csv").write_text("\n".join(rows) + "\n")
     n = len(returns) if iteration is None else iteration
     (folder / "state.json").write_text(json.dumps({"iteration": n}))
@@ -87,9 +94,34 @@ def test_status_draws_the_curves_so_far_or_says_nothing_has_trained(
     assert "training curves: no run has trained" in capsys.readouterr().out
     assert not (out / "progress.png").exists()
 
-    _progress(out / "parked" / "ompo-s1", [1.0, 2.0], iteration=2)
+    _progress(out / "parked" / "ompo-s1", [1.0, 2.0], iteration=2, wall=900.0)
     assert main(["campaign", str(spec), "--status"]) == 0
     text = capsys.readouterr().out
-    assert "ompo-s1: partial (2/30)" in text
+    assert "ompo-s1: partial (2/30), about 7.0 h left" in text  # 28 iterations of 900.5 s
+    assert "ompo-s0: pending (0/30), about 7.5 h left" in text  # 30 at its method's rate
+    assert "training left: about 22.0 worker-hours for 3 run(s)" in text
+    assert "3 run(s) without a measured rate" in text  # SAC's: none of them has trained
     assert f"training curves so far: {out / 'progress.png'}" in text
     assert (out / "progress.png").is_file()
+
+
+def test_time_left_is_each_run_s_recent_rate_or_its_method_s(tmp_path: Path) -> None:
+    spec = tmp_path / "grid.toml"
+    spec.write_text(SPEC)
+    campaign = load_campaign(spec)
+    out = tmp_path / "grid"
+    _progress(out / "finished" / "sac-s0", [0.0] * 30, wall=10.0)  # 10, 11, ..., 39 s
+    _progress(out / "parked" / "ompo-s0", [0.0] * 5, wall=600.0)  # 600, ..., 604 s
+    _progress(out / "runs" / "ompo-s1", [0.0] * 2, wall=900.0)  # 900, 901 s
+
+    left = seconds_left(campaign, out, write_status(campaign, out))
+    assert "sac-s0" not in left  # finished
+    assert left["sac-s1"] == left["sac-s2"] == pytest.approx(38.0 * 30)  # sac-s0's last three
+    assert left["ompo-s0"] == pytest.approx(603.0 * 25)  # its last three: 602, 603, 604
+    assert left["ompo-s1"] == pytest.approx(900.5 * 28)
+    assert left["ompo-s2"] == pytest.approx((603.0 + 900.5) / 2 * 30)  # its method's runs
+
+    spec.write_text(SPEC.replace('methods = ["sac", "ompo"]', 'methods = ["sac", "ompo", "dbc"]'))
+    campaign = load_campaign(spec)
+    left = seconds_left(campaign, out, write_status(campaign, out))
+    assert left["dbc-s0"] is None  # no run of its method has trained

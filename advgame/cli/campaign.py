@@ -29,8 +29,8 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
     p.add_argument("--runs", metavar="RUN,...",
                    help="train only these runs (METHOD-sSEED, comma-separated), in this order")  # fmt: skip
     p.add_argument("--status", action="store_true",
-                   help="print what is done, draw the training curves so far (progress.png) "
-                   "and stop")  # fmt: skip
+                   help="print what is done and the training left, draw the training curves so "
+                   "far (progress.png) and stop")  # fmt: skip
     p.add_argument("--park", action="store_true",
                    help="park every run in training at its last checkpoint in parked/ (commit "
                    "it to resume the runs in another checkout) and stop")  # fmt: skip
@@ -50,6 +50,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         progress_curves,
         run_campaign,
         search_status,
+        seconds_left,
         table_status,
         write_status,
     )
@@ -67,8 +68,19 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     if args.status:
         out.mkdir(parents=True, exist_ok=True)
         status = write_status(campaign, out)
+        left = seconds_left(campaign, out, status)
         for run, s in status["runs"].items():
-            print(f"{run}: {s['state']} ({s['iteration']}/{s['of']})")
+            secs = left.get(run)
+            eta = f", about {secs / 3600:.1f} h left" if secs is not None else ""
+            print(f"{run}: {s['state']} ({s['iteration']}/{s['of']}){eta}")
+        if left:
+            known = [v for v in left.values() if v is not None]
+            unknown = len(left) - len(known)
+            print(
+                f"training left: about {sum(known) / 3600:.1f} worker-hours for {len(known)} "
+                f"run(s), at the rates they (or their method's runs) trained at"
+                + (f"; {unknown} run(s) without a measured rate" if unknown else "")
+            )
         print(f"evaluated: {', '.join(status['evaluated']) or 'none'}; table: {status['table']}")
         search = search_status(campaign, out, done_runs(status))
         if search is not None:

@@ -65,6 +65,7 @@ from advgame.workflows.campaign_status import (
     progress_curves,
     run_dir,
     search_status,
+    seconds_left,
     table_status,
     write_status,
 )
@@ -82,6 +83,7 @@ __all__ = [
     "run_campaign",
     "run_dir",
     "search_status",
+    "seconds_left",
     "table_status",
     "write_status",
 ]

@@ -13,18 +13,22 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from advgame.core.config import read_json, write_atomic
 from advgame.workflows.campaign_grid import Campaign
 
 __all__ = [
     "FINISHED",
     "PROGRESS_CURVES",
+    "RATE_ITERATIONS",
     "done_runs",
     "progress",
     "progress_curves",
     "progress_files",
     "run_dir",
     "search_status",
+    "seconds_left",
     "table_status",
     "write_status",
 ]
@@ -177,3 +181,41 @@ def progress_curves(campaign: Campaign, out: Path) -> Path | None:
     if not files:
         return None
     return method_curves(campaign, files, out / PROGRESS_CURVES, ragged=True)
+
+
+RATE_ITERATIONS = 3
+"""Last iterations of a run whose mean wall time `seconds_left` estimates the rest from."""
+
+
+def _iteration_seconds(path: Path) -> float | None:
+    """Mean wall seconds of the last `RATE_ITERATIONS` iterations of a progress CSV (None: none)."""
+    from advgame.core.files import read_csv
+
+    fix = "It is rewritten by the run's next iteration (`advgame resume`), or delete the run."
+    rows = read_csv(path, "progress file", fix, columns=())
+    wall = [float(r["wall_s"]) for r in rows if r.get("wall_s") not in (None, "", "nan")]
+    return float(np.mean(wall[-RATE_ITERATIONS:])) if wall else None
+
+
+def seconds_left(campaign: Campaign, out: Path, status: dict[str, Any]) -> dict[str, float | None]:
+    """Wall seconds of one worker each unfinished run of `status` still needs, estimated.
+
+    A run that has trained is timed at the mean of its last `RATE_ITERATIONS` iterations
+    (``wall_s`` of its furthest ``progress.csv``); one that has not, at the mean of its
+    method's runs that have. None where neither has a measured rate. The rates are what the
+    runs took where they trained: beside another run on the same cores, as campaigns train.
+    """
+    files = progress_files(campaign, out)
+    rate = {r: _iteration_seconds(f) for r, f in files.items()}
+    left: dict[str, float | None] = {}
+    for method in campaign.methods:
+        runs = campaign.method_runs(method)
+        known = [v for r in runs if (v := rate.get(r)) is not None]
+        fallback = float(np.mean(known)) if known else None
+        for r in runs:
+            s = status["runs"][r]
+            if s["state"] == "done":
+                continue
+            per = rate.get(r) if rate.get(r) is not None else fallback
+            left[r] = None if per is None else per * (s["of"] - s["iteration"])
+    return left
