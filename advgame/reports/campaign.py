@@ -96,18 +96,23 @@ def _curves(campaign: CampaignGrid, out: Path, finished: Path) -> Path | None:
     files = {
         r: finished / r / "progress.csv" for m in campaign.methods for r in campaign.method_runs(m)
     }
-    return method_curves(campaign, files, out / CURVES)
+    return method_curves(campaign, files, out / CURVES, title=f"{campaign.scenario}: {out.name}")
 
 
 def method_curves(
-    campaign: CampaignGrid, files: Mapping[str, Path], path: Path, ragged: bool = False
+    campaign: CampaignGrid,
+    files: Mapping[str, Path],
+    path: Path,
+    ragged: bool = False,
+    title: str = "",
 ) -> Path | None:
     """Draw each method's training return (and cost, for safe campaigns) over steps; save it.
 
     `files` maps runs (``METHOD-sSEED``) to their ``progress.csv``; a method's line is the mean
     over its runs, its band their minimum and maximum. Runs are cut to the shortest one's
     points, or with `ragged` (runs still in training) each point is over the runs that have
-    reached it (`advgame.reports.plots.plot_method_curves`). None when nothing is drawn.
+    reached it (`advgame.reports.plots.plot_method_curves`); `title` heads the figure. None
+    when nothing is drawn.
     """
     from advgame.reports.plots import plot_method_curves
 
@@ -119,7 +124,7 @@ def method_curves(
     if campaign.cost_limit is not None:
         columns.append("protagonist_phase_true_cost")
         lines["protagonist_phase_true_cost"] = float(campaign.cost_limit)
-    return plot_method_curves(groups, path, columns, lines=lines, ragged=ragged)
+    return plot_method_curves(groups, path, columns, lines=lines, ragged=ragged, title=title)
 
 
 def _cost_md(campaign: CampaignGrid, cells: list[dict[str, Any]]) -> str:

@@ -240,14 +240,15 @@ def plot_method_curves(
     x: str = "protagonist_steps",
     lines: Mapping[str, float] | None = None,
     ragged: bool = False,
+    title: str = "",
 ) -> Path | None:
     """Draw each group's (method's) mean training curve over its runs, with their min-max band.
 
     `groups` maps a label to the progress CSVs of its runs (seeds); one panel per column of
     `columns`; runs are cut to the shortest one's rows, or with `ragged` each point is over the
     runs that have reached it (`method_series`). `lines` draws a dashed horizontal line on a
-    column's panel (a cost limit). Runs without the columns are skipped; returns None (and
-    writes nothing) if nothing is left.
+    column's panel (a cost limit); `title` heads the figure. Runs without the columns are
+    skipped; returns None (and writes nothing) if nothing is left.
     """
     import warnings
 
@@ -255,6 +256,8 @@ def plot_method_curves(
     if not data:
         return None
     fig, axes = _panel_column(len(columns), 2.8)
+    if title:
+        fig.suptitle(title)
     for ax, col in zip(axes, columns, strict=True):
         for label, d in data.items():
             xs, ys = np.nanmax(d[x], axis=0), d[col]

@@ -180,7 +180,8 @@ def progress_curves(campaign: Campaign, out: Path) -> Path | None:
     files = progress_files(campaign, out)
     if not files:
         return None
-    return method_curves(campaign, files, out / PROGRESS_CURVES, ragged=True)
+    title = f"{campaign.scenario}: {out.name}, {len(files)} of {len(campaign.runs())} runs so far"
+    return method_curves(campaign, files, out / PROGRESS_CURVES, ragged=True, title=title)
 
 
 RATE_ITERATIONS = 3
