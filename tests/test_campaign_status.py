@@ -91,7 +91,9 @@ def test_status_draws_the_curves_so_far_or_says_nothing_has_trained(
     spec.write_text(SPEC)
     out = tmp_path / "grid"
     assert main(["campaign", str(spec), "--status"]) == 0
-    assert "training curves: no run has trained" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "training curves: nothing to draw yet" in text
+    assert "training left: 6 run(s), none with a measured rate yet" in text
     assert not (out / "progress.png").exists()
 
     _progress(out / "parked" / "ompo-s1", [1.0, 2.0], iteration=2, wall=900.0)
@@ -125,3 +127,14 @@ def test_time_left_is_each_run_s_recent_rate_or_its_method_s(tmp_path: Path) -> 
     campaign = load_campaign(spec)
     left = seconds_left(campaign, out, write_status(campaign, out))
     assert left["dbc-s0"] is None  # no run of its method has trained
+
+
+def test_a_damaged_wall_time_is_no_rate_rather_than_a_traceback(tmp_path: Path) -> None:
+    spec = tmp_path / "grid.toml"
+    spec.write_text(SPEC)
+    campaign = load_campaign(spec)
+    out = tmp_path / "grid"
+    (out / "runs" / "sac-s0").mkdir(parents=True)
+    (out / "runs" / "sac-s0" / "progress.csv").write_text("iteration,wall_s\n1,abc\n2,\n")
+    left = seconds_left(campaign, out, write_status(campaign, out))
+    assert left["sac-s0"] is None and left["ompo-s0"] is None

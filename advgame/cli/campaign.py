@@ -73,14 +73,16 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
             secs = left.get(run)
             eta = f", about {secs / 3600:.1f} h left" if secs is not None else ""
             print(f"{run}: {s['state']} ({s['iteration']}/{s['of']}){eta}")
-        if left:
-            known = [v for v in left.values() if v is not None]
+        known = [v for v in left.values() if v is not None]
+        if known:
             unknown = len(left) - len(known)
             print(
                 f"training left: about {sum(known) / 3600:.1f} worker-hours for {len(known)} "
                 f"run(s), at the rates they (or their method's runs) trained at"
                 + (f"; {unknown} run(s) without a measured rate" if unknown else "")
             )
+        elif left:
+            print(f"training left: {len(left)} run(s), none with a measured rate yet")
         print(f"evaluated: {', '.join(status['evaluated']) or 'none'}; table: {status['table']}")
         search = search_status(campaign, out, done_runs(status))
         if search is not None:
@@ -96,7 +98,9 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         )
         curves = progress_curves(campaign, out)
         print(
-            f"training curves so far: {curves}" if curves else "training curves: no run has trained"
+            f"training curves so far: {curves}"
+            if curves
+            else "training curves: nothing to draw yet"
         )
         return 0
     path = run_campaign(

@@ -194,8 +194,16 @@ def _iteration_seconds(path: Path) -> float | None:
 
     fix = "It is rewritten by the run's next iteration (`advgame resume`), or delete the run."
     rows = read_csv(path, "progress file", fix, columns=())
-    wall = [float(r["wall_s"]) for r in rows if r.get("wall_s") not in (None, "", "nan")]
+    wall = [w for r in rows if np.isfinite(w := _number(r.get("wall_s")))]
     return float(np.mean(wall[-RATE_ITERATIONS:])) if wall else None
+
+
+def _number(text: str | None) -> float:
+    """A CSV cell as a float (nan: empty, missing or not a number)."""
+    try:
+        return float(text) if text else float("nan")
+    except ValueError:
+        return float("nan")
 
 
 def seconds_left(campaign: Campaign, out: Path, status: dict[str, Any]) -> dict[str, float | None]:
