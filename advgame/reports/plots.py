@@ -28,6 +28,7 @@ __all__ = [
     "plot_method_curves",
     "plot_safety",
     "plot_training_curves",
+    "read_progress",
 ]
 
 log = logging.getLogger(__name__)
@@ -145,8 +146,8 @@ def plot_budget_curve(
     return _save(fig, path)
 
 
-def _read_progress(path: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a progress CSV as float arrays (non-numeric cells become nan)."""
+def read_progress(path: str | Path) -> dict[str, np.ndarray]:
+    """Columns of a run's ``progress.csv`` as float arrays (empty or non-numeric cells: nan)."""
 
     def num(text: str | None) -> float:
         try:
@@ -177,7 +178,7 @@ def plot_training_curves(
         if not Path(csv_path).is_file():
             log.warning("no progress CSV for run %r at %s; skipped", name, csv_path)
             continue
-        runs[name] = _read_progress(csv_path)
+        runs[name] = read_progress(csv_path)
     wanted = (
         list(columns)
         if columns
@@ -221,7 +222,7 @@ def method_series(
     """
     data: dict[str, dict[str, np.ndarray]] = {}
     for label, paths in groups.items():
-        runs = [_read_progress(p) for p in paths if Path(p).is_file()]
+        runs = [read_progress(p) for p in paths if Path(p).is_file()]
         runs = [r for r in runs if x in r and all(c in r for c in columns)]
         if not runs:
             if paths:  # a group with no runs yet (a campaign's pending method) is no surprise

@@ -160,9 +160,10 @@ def progress_files(campaign: Campaign, out: Path) -> dict[str, Path]:
 
     files = {}
     for r in campaign.runs():
-        copies = [out / where / r / "progress.csv" for where in (FINISHED, "runs", PARKED)]
-        furthest = max(copies, key=_rows)  # the first of equals: finished, then runs/
-        if _rows(furthest):
+        copies = (out / where / r / "progress.csv" for where in (FINISHED, "runs", PARKED))
+        rows = {path: _rows(path) for path in copies}  # each file counted once
+        furthest = max(rows, key=rows.__getitem__)  # the first of equals: finished, then runs/
+        if rows[furthest]:
             files[r] = furthest
     return files
 
@@ -190,20 +191,11 @@ RATE_ITERATIONS = 3
 
 def _iteration_seconds(path: Path) -> float | None:
     """Mean wall seconds of the last `RATE_ITERATIONS` iterations of a progress CSV (None: none)."""
-    from advgame.core.files import read_csv
+    from advgame.reports.plots import read_progress
 
-    fix = "It is rewritten by the run's next iteration (`advgame resume`), or delete the run."
-    rows = read_csv(path, "progress file", fix, columns=())
-    wall = [w for r in rows if np.isfinite(w := _number(r.get("wall_s")))]
-    return float(np.mean(wall[-RATE_ITERATIONS:])) if wall else None
-
-
-def _number(text: str | None) -> float:
-    """A CSV cell as a float (nan: empty, missing or not a number)."""
-    try:
-        return float(text) if text else float("nan")
-    except ValueError:
-        return float("nan")
+    wall = read_progress(path).get("wall_s", np.array([]))
+    wall = wall[np.isfinite(wall)]
+    return float(wall[-RATE_ITERATIONS:].mean()) if len(wall) else None
 
 
 def seconds_left(campaign: Campaign, out: Path, status: dict[str, Any]) -> dict[str, float | None]:
