@@ -53,10 +53,13 @@ ENVS: dict[str, dict[str, Any]] = {
     "TwoArmHandover": {"robots": ["Panda", "Panda"]},
     "TwoArmTransport": {"robots": ["Panda", "Panda"]},
     "MultiRobustDoor": {"robots": ["Panda", "Panda"], "external_robots": (1,)},
-    "LiftCausal": {"robots": "Panda"},
-    "DoorCausal": {"robots": "Panda"},
+    "LiftCausal": {"robots": "Panda", "max_episode_steps": 300},
+    "DoorCausal": {"robots": "Panda", "max_episode_steps": 300},
 }
-"""Task-base keyword arguments per robosuite environment (scenario id ``"RS-<env>"``)."""
+"""Task-base keyword arguments per robosuite environment (scenario id ``"RS-<env>"``).
+
+The causal tasks keep the Robust Gymnasium paper's horizon, 300 steps (its RSC table); the
+others truncate at the task base's 200. A ``max_episode_steps`` given to `advgame.make` wins."""
 
 TABLE_OBJECTS = {
     "Lift": ("cube_main",),

@@ -190,7 +190,7 @@ def test_bad_correlations_and_turns_say_what_is_wrong(lift: advgame.Game) -> Non
 
 
 @pytest.mark.parametrize("scenario", ["RS-LiftCausal", "RS-DoorCausal"])
-def test_the_atla_preset_is_the_training_correlation_plus_the_papers_observation_attack(
+def test_the_atla_preset_and_the_horizon_are_the_papers(
     scenario: str,
 ) -> None:
     from advgame.scenarios.robosuite_causal import ATLA_EPS
@@ -204,3 +204,6 @@ def test_the_atla_preset_is_the_training_correlation_plus_the_papers_observation
     assert "observation_adversary" not in game.preset.adversaries
     game.close()
     default.close()
+    paper = advgame.make(scenario, preset="default")
+    assert paper.task.max_episode_steps == 300  # the paper's horizon (its RSC table)
+    paper.close()

@@ -138,16 +138,58 @@ def test_each_loss_trains_what_the_authors_let_it() -> None:
         assert th.allclose(log_std, th.full_like(log_std, bound))
 
 
-def test_schedule_targets_and_save_load_keep_every_network(tmp_path: Path) -> None:
+def test_the_next_encoding_is_a_target_of_the_transition_model_not_trained_by_it() -> None:
     model = _model()
+    _jiggle(model)
+    data = _batch()
+    nxt = data.next_observations.clone().requires_grad_(True)
+    _, trans, _ = model.model_losses(data._replace(next_observations=nxt))
+    (grad,) = th.autograd.grad(trans, nxt, allow_unused=True)
+    assert grad is None  # the authors detach phi(s'); only phi(s) (through mu) is trained
+    # the same loss without the detach would reach s': the check can tell the two apart
+    policy = model.policy
+    mu, sigma = policy.transition_model(policy.encode(data.observations), data.actions)
+    undetached = (0.5 * ((mu - policy.encode(nxt)) / sigma).pow(2) + th.log(sigma)).mean()
+    assert float(th.autograd.grad(undetached, nxt)[0].abs().sum()) > 0
+
+
+def test_critic_target_reads_the_target_encoder_and_the_lower_target_q() -> None:
+    model = _model()
+    _jiggle(model)
+    with th.no_grad():  # a target encoder and target Q networks unlike the online ones
+        for p in model.critic_target.parameters():
+            p.add_(0.3 * th.randn(p.shape, generator=th.Generator().manual_seed(3)))
+    data, alpha = _batch(), th.tensor(0.1)
+    th.manual_seed(4)
+    got = model.critic_loss(data, alpha)
+    th.manual_seed(4)  # the same sampled next actions
+    with th.no_grad():
+        next_a, next_logp = model.actor.action_log_prob(data.next_observations)
+        z_next = model.policy.target_encoder(data.next_observations)
+        qs = [q(th.cat([z_next, next_a], 1)) for q in model.critic_target.q_networks]
+        soft = th.min(qs[0], qs[1]) - alpha * next_logp.reshape(-1, 1)
+        y = data.rewards + (1 - data.dones) * GAMMA * soft
+        z = model.policy.encoder(data.observations)
+        want = sum(
+            ((q(th.cat([z, data.actions], 1)) - y) ** 2).mean() for q in model.critic.q_networks
+        )
+    assert float(got.detach()) == pytest.approx(float(want), rel=1e-5)
+
+
+def test_schedule_targets_and_save_load_keep_every_network(tmp_path: Path) -> None:
+    model = _model(tau=0.01, encoder_tau=0.05)  # two rates, so a swap of them would show
     model.learn(150)
     updates = 150 - 50  # SB3 trains after each step once num_timesteps > learning_starts
     assert model.counts == {"critic": updates, "model": updates, "actor": 50, "target": 50}
-    before = [p.clone() for p in model.policy.target_encoder.parameters()]
+    pairs = [
+        (model.policy.encoder, model.policy.target_encoder, 0.05),
+        *zip(model.critic.q_networks, model.critic_target.q_networks, (0.01, 0.01), strict=True),
+    ]
+    before = [[p.clone() for p in target.parameters()] for _, target, _ in pairs]
     model._update_targets()
-    targets, online = model.policy.target_encoder.parameters(), model.policy.encoder.parameters()
-    for old, new, now in zip(before, targets, online, strict=True):
-        assert th.allclose(new, 0.995 * old + 0.005 * now)
+    for (online, target, rate), old in zip(pairs, before, strict=True):
+        for was, new, now in zip(old, target.parameters(), online.parameters(), strict=True):
+            assert th.allclose(new, (1 - rate) * was + rate * now)
     model.save(tmp_path / "m.zip")
     back = DBC.load(tmp_path / "m.zip", device="cpu")
     mine, theirs = model.policy.state_dict(), back.policy.state_dict()
