@@ -95,3 +95,19 @@ def test_bad_threat_models_are_clear_errors(two_runs: tuple[Path, Path]) -> None
         adversary_columns("Hopper-v5", ["attack:mad"], threat="rarl")
     with pytest.raises(ConfigError, match="has no such agent"):
         adversary_columns("Hopper-v5", [f"learned:{atla}"], threat="rarl")
+
+
+@pytest.mark.usefixtures("one_torch_thread")
+def test_a_table_of_presets_only_names_no_threat_model(
+    two_runs: tuple[Path, Path], tmp_path: Path
+) -> None:
+    ppo, _ = two_runs
+    out = tmp_path / "results"
+    out.mkdir()
+    (out / "threat.json").write_text("{}")  # left by an earlier table of this folder
+    args = ["evaluate", str(ppo), "--out", str(out), "--seeds", "1", "--budgets", "--workers", "1"]
+    assert main([*args, "--adversaries", "preset:rarl"]) == 0
+    assert not (out / "threat.json").exists()  # the table's columns do not play the atla preset
+    assert "## Threat model" not in (out / "report.md").read_text()
+    assert main([*args, "--adversaries", "preset:rarl", "--threat", "rarl"]) == 0
+    assert json.loads((out / "threat.json").read_text())["preset"] == "rarl"  # a column plays it

@@ -102,7 +102,8 @@ def evaluate_policies(
         budgets: σ levels of the state-noise sweep (empty: no sweep).
         progress: show progress bars.
         threat: the table's one threat model, a preset of `scenario` that attack, learned and
-            best-response columns all play in (default `advgame.evaluation.table.columns.default_threat`).
+            best-response columns all play in (default `advgame.evaluation.table.columns.default_threat`);
+            ``threat.json`` and the report's section only where some column plays in it.
         optimal: search the learned optimal attack for every protagonist
             (`advgame.evaluation.attacks.optimal`): the ``attack optimal`` column, and the
             exploitability (nominal minus its return) in ``exploitability.json`` and the report.
@@ -159,8 +160,11 @@ def evaluate_policies(
             "adversaries": {agent: "each protagonist's own learned adversary, as released"},
         }
     (out / "columns.json").write_text(json.dumps(columns_json, indent=2, default=str) + "\n")
-    record = _threat_record(scenario, threat)
-    (out / "threat.json").write_text(json.dumps(record, indent=2) + "\n")
+    record = _threat_record(scenario, threat)  # checks the name whether or not a column plays it
+    if any(c["game"].get("preset") == threat for c in columns_json.values()):
+        (out / "threat.json").write_text(json.dumps(record, indent=2) + "\n")
+    else:  # no column plays in it (presets only): the report names no threat model
+        (out / "threat.json").unlink(missing_ok=True)
     _write_runs(out, run_dirs)
     return report_folder(out, scenario=scenario)
 
