@@ -63,6 +63,19 @@ def test_method_series_cuts_to_the_shortest_run_or_pads_to_the_longest(tmp_path:
     )
 
 
+def test_a_method_with_no_run_yet_is_no_warning_but_a_run_without_the_column_is(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    pending = {"m": [tmp_path / "none" / "progress.csv"]}  # a campaign's method not trained yet
+    with caplog.at_level("WARNING", logger="advgame.reports.plots"):
+        assert method_series(pending, ["protagonist_phase_true_return"]) == {}
+    assert caplog.records == []
+    _progress(tmp_path / "a", [1.0])
+    with caplog.at_level("WARNING", logger="advgame.reports.plots"):
+        assert method_series({"m": [tmp_path / "a" / "progress.csv"]}, ["cost"]) == {}
+    assert "no progress CSV of 'm' has" in caplog.text
+
+
 def test_each_run_is_read_from_its_furthest_copy(tmp_path: Path) -> None:
     spec = tmp_path / "grid.toml"
     spec.write_text(SPEC)

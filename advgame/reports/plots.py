@@ -222,10 +222,10 @@ def method_series(
     """
     data: dict[str, dict[str, np.ndarray]] = {}
     for label, paths in groups.items():
-        runs = [read_progress(p) for p in paths if Path(p).is_file()]
-        runs = [r for r in runs if x in r and all(c in r for c in columns)]
+        found = [read_progress(p) for p in paths if Path(p).is_file()]
+        runs = [r for r in found if x in r and all(c in r for c in columns)]
         if not runs:
-            if paths:  # a group with no runs yet (a campaign's pending method) is no surprise
+            if found:  # a group with no runs yet (a campaign's pending method) is no surprise
                 log.warning("no progress CSV of %r has %s; skipped", label, [x, *columns])
             continue
         lengths = [len(r[x]) for r in runs]
