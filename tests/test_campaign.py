@@ -120,6 +120,7 @@ def test_bad_campaign_files_are_clear_errors(tmp_path: Path) -> None:
         ('methods = ["ppo"]\nscenario = "Hopper-v5"\nseeds = 3', "list of distinct ints"),
         ('methods = ["ppo"]\nscenario = "Hopper-v5"\n[train.ppo]\nseeds = [1, 1]', "train.ppo"),
         ('methods = ["ppo"]\nscenario = "Hopper-v5"\n[train.ppo]\nseeds = []', "train.ppo"),
+        ('methods = ["ppo"]\nscenario = "Hopper-v5"\nzoo = "Hopper/x"', "zoo must be a folder"),
     ]:
         bad.write_text(text)
         with pytest.raises(ConfigError, match=words):
@@ -327,6 +328,15 @@ def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
     both = ["evaluate", "--zoo", "hopper/ppo", "--zoo", "hopper/atla", "--zoo-adversaries"]
     assert main([*both, "--out", str(tmp_path / "x"), "--budgets"]) == 2
     assert "released without an adversary" in capsys.readouterr().err
+    # a campaign on a changed task releases into a folder of its own, beside hopper/
+    text = grid.read_text()
+    grid.write_text('zoo = "hopper-shifted"\n' + text)
+    try:
+        assert main(args) == 0
+    finally:
+        grid.write_text(text)  # the module's other tests read the file as it was
+    ids = {e.id for e in zoo.entries(root)}
+    assert ids == {"hopper/ppo", "hopper/atla", "hopper-shifted/ppo", "hopper-shifted/atla"}
     (root / found["hopper/ppo"].files["protagonist"]["path"]).write_bytes(b"changed")
     with pytest.raises(FileFormatError, match="sha256"):
         zoo.load("hopper/ppo")

@@ -7,6 +7,7 @@ the threat model, the optimal attack's budget)::
     scenario = "Hopper-v5"
     methods = ["ppo", "atla"]
     seeds = [0, 1, 2]
+    zoo = "hopper"             # --release: the zoo folder (default: the scenario's name)
 
     [train]                    # TrainConfig fields for every run
     iterations = 976

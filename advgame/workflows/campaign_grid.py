@@ -56,6 +56,10 @@ class Campaign:
     """Steps of each candidate of the searched optimal attack (0: no optimal column)."""
     cost_limit: float | None = None
     """Episode cost limit of a safe campaign: adds the cost table (None: no cost table)."""
+    zoo: str | None = None
+    """The zoo folder `--release` puts the median agents in (``ZOO/METHOD``; None: the
+    scenario's name in lowercase, ``hopper`` for Hopper-v5): a campaign on a changed task
+    (OMPO's shifting Hopper) releases beside the nominal task's agents, not over them."""
     optimal_grid: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     """Overrides of `advgame.evaluation.attacks.optimal.OPTIMAL_GRID` entries, by index (a TOML
     key such as ``4``): ``{"4": {"steps_scale": 10}}`` trains the long recipe candidate 10 times
@@ -105,6 +109,13 @@ class Campaign:
             isinstance(limit, bool) or not isinstance(limit, int | float) or not limit >= 0
         ):
             raise ConfigError(f"evaluate.cost_limit must be a number >= 0, got {limit!r}.")
+        if self.zoo is not None and (
+            not isinstance(self.zoo, str) or not _LABEL.fullmatch(self.zoo)
+        ):
+            raise ConfigError(
+                f"Campaign zoo must be a folder name (lowercase letters, digits, '-', '_', '.'), "
+                f"got {self.zoo!r}."
+            )
         self.search_grid()  # refuses a bad override before anything trains
         for name in self.runs():  # every TrainConfig is checked before anything runs
             self.config(name)
@@ -204,7 +215,7 @@ def load_campaign(path: str | Path) -> Campaign:
         raise ConfigError(f"No campaign file at {path}.") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"The campaign file {path} is not valid TOML: {exc}.") from None
-    known = {"scenario", "methods", "seeds", "train", "evaluate"}
+    known = {"scenario", "methods", "seeds", "zoo", "train", "evaluate"}
     if set(data) - known:
         raise ConfigError(f"{path}: unknown keys {sorted(set(data) - known)}; use {sorted(known)}.")
     train = dict(data.get("train", {}))
@@ -221,6 +232,7 @@ def load_campaign(path: str | Path) -> Campaign:
         scenario=str(data.get("scenario", "")),
         methods=methods,
         seeds=_specs(data.get("seeds", (0,))),
+        zoo=data.get("zoo"),
         train=train,
         per_method=per_method,
         adversaries=_specs(ev.get("adversaries", ("attacks",))),

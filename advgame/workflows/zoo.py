@@ -278,7 +278,7 @@ def release_campaign(
         rows = list(csv.DictReader(f))
     optimal_path = out / "results" / "optimal.json"
     optimal = read_json(optimal_path, "optimal-attack search") if optimal_path.exists() else {}
-    env = campaign.scenario.split("-v")[0].lower()
+    env = campaign.zoo or campaign.scenario.split("-v")[0].lower()
     released = []
     for row in rows:
         run = run_dir(out, row["median_agent"])
