@@ -304,6 +304,8 @@ def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
     assert set(found) == {"hopper/ppo", "hopper/atla"}
     assert set(found["hopper/atla"].files) >= {"protagonist", "normalizer", "adversary"}
     assert "adversary" not in found["hopper/ppo"].files  # PPO trained against nobody
+    # the file names no threat model: the entries record the one the attacks played in
+    assert {e.threat for e in found.values()} == {"atla"}
     for e in found.values():
         zoo.verify(e, root)  # checksums match
     capsys.readouterr()
@@ -353,7 +355,7 @@ def test_every_released_agent_matches_its_manifest_and_plays() -> None:
         pytest.skip(f"no agents released in {zoo.default_root()} yet")
     for e in found:
         spec = zoo.load(e.id)  # verifies the sha256 of every file
-        game = advgame.make(e.scenario, preset=e.threat, max_episode_steps=20)
+        game = advgame.make(e.scenario, preset=e.threat or "default", max_episode_steps=20)
         policies = spec if isinstance(spec, dict) else {"protagonist": spec}  # safe: actors
         [result] = rollout(game, policies, seed=0)
         assert result.length >= 1
@@ -404,6 +406,7 @@ def test_a_safe_campaign_tables_return_cost_and_satisfaction_per_method(tmp_path
     assert main(args) == 0
     lag = zoo.entry("safetyhopper/ppo-lag", root)
     assert lag.algo == "ppo-lag" and set(lag.files) == {"protagonist"}
+    assert lag.threat == ""  # a nominal column only: the table played no threat model
     policies = zoo.load("safetyhopper/ppo-lag", root)
     assert set(policies) == {"protagonist"}
     game = advgame.make("SafetyHopper-v5", max_episode_steps=5)

@@ -150,5 +150,5 @@ def _cmd_zoo(args: argparse.Namespace) -> int:
         zoo.verify(e, root)
         print(f"{e.id:<{wid}} {e.scenario:<{wsc}} {e.steps:>9} {e.seed:>4} "
               f"{e.natural_return:>8.1f} {e.worst_attack_return:>8.1f}  "
-              f"{e.worst_attack} ({e.threat})")  # fmt: skip
+              f"{e.worst_attack}" + (f" ({e.threat})" if e.threat else ""))  # fmt: skip
     return 0

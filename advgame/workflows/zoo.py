@@ -90,7 +90,8 @@ class ZooEntry:
     worst_attack: str
     """That attack's column."""
     threat: str
-    """The threat model (preset) the attacks played in."""
+    """The threat model (preset) the attacks played in; empty where the evaluation played
+    none (every column a preset of its own, such as OMPO's shifted bodies)."""
     algo: str = "ppo"
     """The SB3 algorithm of the protagonist file, or the constrained/team learner
     (`advgame.training.TEAM_ALGOS`) whose actors file (with its normalizers) it is."""
@@ -279,6 +280,8 @@ def release_campaign(
     optimal_path = out / "results" / "optimal.json"
     optimal = read_json(optimal_path, "optimal-attack search") if optimal_path.exists() else {}
     env = campaign.zoo or campaign.scenario.split("-v")[0].lower()
+    threat_path = out / "results" / "threat.json"  # absent: no column played a threat model
+    threat = read_json(threat_path, "threat model")["preset"] if threat_path.exists() else ""
     released = []
     for row in rows:
         run = run_dir(out, row["median_agent"])
@@ -297,7 +300,7 @@ def release_campaign(
             method=campaign.base_method(row["method"]),
             steps=cfg.protagonist_steps * cfg.iterations + cfg.warmup_steps, seed=cfg.seed,
             natural_return=float(row["natural"]), worst_attack_return=float(row["worst"]),
-            worst_attack=row["worst_attack"], threat=campaign.threat or "default",
+            worst_attack=row["worst_attack"], threat=threat,
             algo=algo, config=read_json(run / "config.json", "run config"),
         )  # fmt: skip
         released.append(release(entry, sources, root))
