@@ -63,6 +63,28 @@ def test_method_series_cuts_to_the_shortest_run_or_pads_to_the_longest(tmp_path:
     )
 
 
+def test_the_curves_numbers_are_written_beside_the_figure(tmp_path: Path) -> None:
+    import csv
+
+    from advgame.reports.plots import plot_method_curves
+
+    _progress(tmp_path / "a", [1.0, 2.0, 3.0])
+    _progress(tmp_path / "b", [5.0, 6.0])
+    groups = {"m": [tmp_path / "a" / "progress.csv", tmp_path / "b" / "progress.csv"]}
+    figure = plot_method_curves(
+        groups, tmp_path / "fig.png", ["protagonist_phase_true_return"], ragged=True
+    )
+    assert figure is not None and figure.is_file()
+    with (tmp_path / "fig.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [r["protagonist_steps"] for r in rows] == ["10000", "20000", "30000"]
+    assert [int(r["runs"]) for r in rows] == [2, 2, 1]
+    assert [float(r["protagonist_phase_true_return_mean"]) for r in rows] == [3, 4, 3]
+    assert [float(r["protagonist_phase_true_return_min"]) for r in rows] == [1, 2, 3]
+    assert [float(r["protagonist_phase_true_return_max"]) for r in rows] == [5, 6, 3]
+    assert {r["method"] for r in rows} == {"m"}
+
+
 def test_a_method_with_no_run_yet_is_no_warning_but_a_run_without_the_column_is(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:

@@ -29,6 +29,7 @@ __all__ = [
     "plot_safety",
     "plot_training_curves",
     "read_progress",
+    "write_method_points",
 ]
 
 log = logging.getLogger(__name__)
@@ -234,6 +235,38 @@ def method_series(
     return data
 
 
+def write_method_points(
+    data: Mapping[str, Mapping[str, np.ndarray]],
+    columns: Sequence[str],
+    path: str | Path,
+    x: str = "protagonist_steps",
+) -> Path:
+    """Write `method_series`' data as a CSV: per method and point, each column's mean, min, max.
+
+    One row per method and point: ``method``, `x`, ``runs`` (how many have reached the point)
+    and ``COLUMN_mean`` / ``_min`` / ``_max`` for each of `columns` (what `plot_method_curves`
+    draws as the line and its band).
+    """
+    import csv
+
+    path = Path(path)
+    names = [f"{c}_{s}" for c in columns for s in ("mean", "min", "max")]
+    with path.open("w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(["method", x, "runs", *names])
+        for label, d in data.items():
+            for k, step in enumerate(np.nanmax(d[x], axis=0)):
+                reached = d[columns[0]][:, k]
+                reached = reached[~np.isnan(reached)]
+                cells = []
+                for c in columns:
+                    ys = d[c][:, k][~np.isnan(d[c][:, k])]
+                    stats = (ys.mean(), ys.min(), ys.max()) if len(ys) else (np.nan,) * 3
+                    cells += [f"{v:.6g}" for v in stats]
+                out.writerow([label, f"{step:.0f}", len(reached), *cells])
+    return path
+
+
 def plot_method_curves(
     groups: Mapping[str, Sequence[str | Path]],
     path: str | Path,
@@ -249,13 +282,15 @@ def plot_method_curves(
     `columns`; runs are cut to the shortest one's rows, or with `ragged` each point is over the
     runs that have reached it (`method_series`). `lines` draws a dashed horizontal line on a
     column's panel (a cost limit); `title` heads the figure. Runs without the columns are
-    skipped; returns None (and writes nothing) if nothing is left.
+    skipped; returns None (and writes nothing) if nothing is left. The numbers drawn go beside
+    the figure, in a CSV of the same name (`write_method_points`).
     """
     import warnings
 
     data = method_series(groups, columns, x, ragged)
     if not data:
         return None
+    write_method_points(data, columns, Path(path).with_suffix(".csv"), x)
     fig, axes = _panel_column(len(columns), 2.8)
     if title:
         fig.suptitle(title)
