@@ -59,7 +59,7 @@ def test_the_wheel_holds_every_released_file_and_is_found_when_installed(
     monkeypatch.syspath_prepend(str(tmp_path / "site"))
     monkeypatch.chdir(tmp_path)
     assert zoo.default_root() == tmp_path / "site" / "advgame_zoo"  # before the checkout's
-    assert len(zoo.entries()) == len(entries) == 21
+    assert len(zoo.entries()) == len(entries) >= 21  # every entry of the checkout's manifest
     spec = zoo.load("hopper/ppo")  # checksums verified against the packaged manifest
     assert Path(spec.path).is_relative_to(tmp_path / "site")
     # a damaged packaged file is refused as a checkout's would be
