@@ -235,6 +235,19 @@ def method_series(
     return data
 
 
+def _band(ys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean, minimum and maximum over runs (axis 0) of `ys`, ignoring nan.
+
+    A nan is a run that has not reached the point; a point no run has reached is nan in all
+    three.
+    """
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(ys, axis=0), np.nanmin(ys, axis=0), np.nanmax(ys, axis=0)
+
+
 def write_method_points(
     data: Mapping[str, Mapping[str, np.ndarray]],
     columns: Sequence[str],
@@ -255,15 +268,11 @@ def write_method_points(
         out = csv.writer(f)
         out.writerow(["method", x, "runs", *names])
         for label, d in data.items():
+            runs = np.sum(~np.isnan(d[columns[0]]), axis=0)
+            bands = [np.stack(_band(d[c]), axis=1) for c in columns]  # [points, 3] per column
             for k, step in enumerate(np.nanmax(d[x], axis=0)):
-                reached = d[columns[0]][:, k]
-                reached = reached[~np.isnan(reached)]
-                cells = []
-                for c in columns:
-                    ys = d[c][:, k][~np.isnan(d[c][:, k])]
-                    stats = (ys.mean(), ys.min(), ys.max()) if len(ys) else (np.nan,) * 3
-                    cells += [f"{v:.6g}" for v in stats]
-                out.writerow([label, f"{step:.0f}", len(reached), *cells])
+                cells = [f"{v:.6g}" for band in bands for v in band[k]]
+                out.writerow([label, f"{step:.0f}", int(runs[k]), *cells])
     return path
 
 
@@ -285,8 +294,6 @@ def plot_method_curves(
     skipped; returns None (and writes nothing) if nothing is left. The numbers drawn go beside
     the figure, in a CSV of the same name (`write_method_points`).
     """
-    import warnings
-
     data = method_series(groups, columns, x, ragged)
     if not data:
         return None
@@ -297,9 +304,7 @@ def plot_method_curves(
     for ax, col in zip(axes, columns, strict=True):
         for label, d in data.items():
             xs, ys = np.nanmax(d[x], axis=0), d[col]
-            with warnings.catch_warnings():  # a point no run has a value at stays blank
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mean, low, high = (f(ys, axis=0) for f in (np.nanmean, np.nanmin, np.nanmax))
+            mean, low, high = _band(ys)
             (line,) = ax.plot(xs, mean, label=f"{label} ({len(ys)})")
             ax.fill_between(xs, low, high, color=line.get_color(), alpha=0.2)
         if lines and col in lines:
