@@ -87,6 +87,7 @@ def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(
     assert status["evaluated"] == ["atla-s0", "atla-s1", "ppo-s0", "ppo-s1"]
     table = (out / "campaign.md").read_text()
     assert "| ppo | 2 |" in table and "| atla | 2 |" in table
+    assert "| worst adversary | worst |" in table  # the column names any kind of adversary
     lines = (out / "campaign.csv").read_text().splitlines()
     assert lines[0].startswith("method,seeds,median_agent,natural,worst")
     assert len(lines) == 3

@@ -145,7 +145,7 @@ def _cmd_zoo(args: argparse.Namespace) -> int:
     wid = max(len("id"), *(len(e.id) for e in found))  # columns as wide as the longest name
     wsc = max(len("scenario"), *(len(e.scenario) for e in found))
     print(f"{'id':<{wid}} {'scenario':<{wsc}} {'steps':>9} {'seed':>4} {'natural':>8} "
-          f"{'worst':>8}  worst attack")  # fmt: skip
+          f"{'worst':>8}  worst adversary")  # fmt: skip
     for e in found:
         zoo.verify(e, root)
         print(f"{e.id:<{wid}} {e.scenario:<{wsc}} {e.steps:>9} {e.seed:>4} "

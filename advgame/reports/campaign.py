@@ -178,7 +178,7 @@ def _row(cells: list[Any]) -> str:
 
 
 def _table_md(campaign: CampaignGrid, rows: list[dict[str, Any]]) -> str:
-    head = "| method | seeds | median agent | natural | IQR | ±95 % | worst attack | worst | IQR | ±95 % |"
+    head = "| method | seeds | median agent | natural | IQR | ±95 % | worst adversary | worst | IQR | ±95 % |"
     lines = [f"# Campaign: {campaign.scenario}", "", head, "|" + "---|" * 10]
     for r in rows:
         cells = [r["method"], r["seeds"], r["median_agent"], r["natural"], r["natural_iqr"],
@@ -186,9 +186,11 @@ def _table_md(campaign: CampaignGrid, rows: list[dict[str, Any]]) -> str:
         lines.append(_row(cells))
     lines += [
         "",
-        "The median agent of a method is its run with the median worst-of-attacks return (the "
-        "lowest mean true return over the table's attack columns); natural is its nominal "
-        "return. IQR and ±95 % (Student t) are over the method's seeds. Data: "
+        "The median agent of a method is its run with the median worst-of-adversaries return "
+        "(the lowest mean true return over the table's adversary columns: attacks and "
+        "presets alike); natural and worst are that agent's nominal and worst returns, "
+        "worst adversary the column of its worst. IQR and ±95 % (Student t) are over the "
+        "method's seeds, so the median agent's natural return can lie outside its IQR. Data: "
         "[results/payoff.csv](results/payoff.csv), the full report: "
         "[results/report.md](results/report.md).",
     ]
