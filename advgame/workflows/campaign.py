@@ -42,11 +42,11 @@ iteration (``runs/``), a finished one is compacted to its last checkpoint and mo
 to a fresh checkout through git) is rebuilt in ``runs/`` first when it is further on than the
 copy there, and its parked copy deleted once it is finished. It then evaluates every finished run's
 final protagonist in one table (finished evaluation units are read back, not replayed) and
-writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-attacks
-return, the interquartile range and the 95 % interval over seeds of its natural and
-worst-of-attacks returns; with a ``cost_limit`` (safe scenarios), per method and column the
-return and episode cost (means over seeds with 95 % intervals) and the share of evaluation
-episodes whose cost stays within the limit. ``status.json`` says at every step what is done.
+writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-adversaries
+return (attack and preset columns alike), the interquartile range and the 95 % interval over
+seeds of its natural and worst-of-adversaries returns; with a ``cost_limit`` (safe scenarios),
+per method and column the return and episode cost (means over seeds with 95 % intervals) and
+the share of evaluation episodes whose cost stays within the limit. ``status.json`` says at every step what is done.
 """
 
 from __future__ import annotations

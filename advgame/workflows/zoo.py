@@ -1,10 +1,11 @@
 """The zoo: released agents of finished campaigns, each with its files' checksums.
 
 A zoo is a folder with ``manifest.json`` and one folder per entry (``hopper/ppo/``): the
-campaign's median agent of a method (by worst-of-attacks return), its observation normalizer,
-and its strongest learned adversary when it has one. The manifest records, per entry, the
-scenario, method, training steps and seed, the run's config, the natural and worst-attack
-returns with the attack and threat model, and the sha256 of every file; `load` checks them.
+campaign's median agent of a method (by worst-of-adversaries return), its observation
+normalizer, and its strongest learned adversary when it has one. The manifest records, per
+entry, the scenario, method, training steps and seed, the run's config, the natural and worst
+returns with the worst adversary (an attack or a preset: ``worst_attack``) and threat model,
+and the sha256 of every file; `load` checks them.
 
 The zoo is found (`default_root`) in ``$ADVGAME_ZOO``, else in the installed ``advgame-zoo``
 package (``pip install "advgame[zoo]"``: the released agents as data, built from the
