@@ -32,8 +32,8 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
                    help="print what is done and the training left, draw the training curves so "
                    "far (progress.png) and stop")  # fmt: skip
     p.add_argument("--park", action="store_true",
-                   help="park every run in training at its last checkpoint in parked/ (commit "
-                   "it to resume the runs in another checkout) and stop")  # fmt: skip
+                   help="park every run in training at its last checkpoint in parked/ (kept "
+                   "beside runs/, not in git: copy it to resume elsewhere) and stop")  # fmt: skip
     p.add_argument("--release", metavar="ZOO", nargs="?", const="", default=None,
                    help="after the table, copy each method's median agent into the zoo "
                    "(default: the repository's zoo/) with its manifest entry")  # fmt: skip
@@ -63,7 +63,9 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         parked = park_campaign(campaign, out)
         for run, iteration in parked.items():
             print(f"parked {run} at iteration {iteration} in {out / 'parked' / run}")
-        print(f"parked {len(parked)} run(s)" + (f"; commit {out / 'parked'}" if parked else ""))
+        print(
+            f"parked {len(parked)} run(s)" + (f"; {out / 'parked'} is not in git" if parked else "")
+        )
         return 0
     if args.status:
         out.mkdir(parents=True, exist_ok=True)

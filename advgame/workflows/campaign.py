@@ -39,7 +39,7 @@ the executor (a local process pool or Ray); a run that was interrupted resumes f
 iteration (``runs/``), a finished one is compacted to its last checkpoint and moved to
 ``finished/`` in one rename (small enough to commit; never trained again). A run parked in
 ``parked/`` (`park_campaign`, `advgame.workflows.park`: how a run longer than a session crosses
-to a fresh checkout through git) is rebuilt in ``runs/`` first when it is further on than the
+to another session) is rebuilt in ``runs/`` first when it is further on than the
 copy there, and its parked copy deleted once it is finished. It then evaluates every finished run's
 final protagonist in one table (finished evaluation units are read back, not replayed) and
 writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-adversaries

@@ -1,9 +1,11 @@
-"""Parking: a campaign's runs in training carried from one checkout to another through git.
+"""Parking: a campaign's runs in training carried from one session to the next.
+
+``parked/`` is kept out of git (replay buffers and half-finished runs do not belong there).
 
 A run resumes from its last checkpoint (``runs/RUN``), but ``runs/`` is not committed: its
 checkpoints pile up, and an off-policy learner's is SB3's whole preallocated replay buffer
 (200 MB for Hopper, more for Ant) at every iteration. A run longer than the time a machine
-is kept (an OMPO run is seven core-hours) would then start over on every fresh checkout.
+is kept (an OMPO run is seven core-hours) would then start over after every interruption.
 
 `park_run` writes what a resume needs, and nothing else, to ``parked/RUN`` beside ``runs/``:
 the run's ``config.json``, ``state.json``, ``population.json`` and ``progress.csv``; its last
