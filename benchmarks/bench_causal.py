@@ -1,7 +1,8 @@
-"""The causal campaign's learners' training speed on RS-LiftCausal, side by side in one run (issue 39).
+"""The causal campaigns' learners' training speed, side by side in one run (issue 39).
 
 Each learner trains on a view of ``RS-LiftCausal`` (preset ``spurious-xnr``, the campaign's
-training correlation; one env, as the campaign runs) with its campaign settings: SAC with the
+training correlation; one env, as the campaign runs), and with ``--scenarios`` also of
+``RS-DoorCausal`` (preset ``spurious-hhl``), with its campaign settings: SAC with the
 paper's SAC table (`advgame.agents.SACConfig`), RSC (`advgame.agents.RSCConfig`: its world
 model and augmentation, which start after ``--warmup`` world-model updates here so that the
 timed steps are the campaign's steady state) and DBC (`advgame.agents.DBCConfig`). A variant
@@ -10,10 +11,12 @@ timed steps are the campaign's steady state) and DBC (`advgame.agents.DBCConfig`
 (the same distribution), to show what that costs. Each model first takes ``--start`` random
 steps and ``--warmup`` learning steps, untimed (imports, robosuite's start and the warm-up
 are not in the rate), then ``--steps`` timed learning steps; rounds interleave the learners.
-Printed: learning steps per second (median over rounds), RSC's split of its wall time (world
+Printed: each task's raw protagonist step (random actions through the advgame view, no
+learner), learning steps per second (median over rounds), RSC's split of its wall time (world
 model, SAC step, the rest), and the calibration (a raw HalfCheetah-v5 step) before and after.
 One torch thread, as training workers run.
-Run: ``python benchmarks/bench_causal.py [--steps 500] [--rounds 2]``. Needs quiet cores.
+Run: ``python benchmarks/bench_causal.py [--steps 500] [--rounds 2]
+[--scenarios RS-LiftCausal,RS-DoorCausal] [--kinds sac,rsc,dbc]``. Needs quiet cores.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import time
 from collections import defaultdict
 from typing import Any
 
+import numpy as np
 import torch
 from _common import clock_method
 from calibrate import line, step_us
@@ -33,7 +37,9 @@ from advgame.agents import DBCConfig, RSCConfig, SACConfig
 from advgame.core.vector import VectorView
 from advgame.core.views import view_factory
 
-SCENARIO, PRESET = "RS-LiftCausal", "spurious-xnr"
+PRESETS = {"RS-LiftCausal": "spurious-xnr", "RS-DoorCausal": "spurious-hhl"}
+"""Each causal task and the training correlation its campaign uses."""
+KINDS = ("sac", "rsc", "rsc (F.gumbel_softmax)", "dbc")
 
 
 def _gumbel_softmax_graph(model: Any) -> None:
@@ -50,8 +56,30 @@ def _gumbel_softmax_graph(model: Any) -> None:
     world.sample_graph = sample_graph
 
 
-def _model(kind: str, start: int, warmup: int, seed: int) -> Any:
-    venv = VectorView([view_factory(SCENARIO, "protagonist", preset=PRESET)])
+def _venv(scenario: str) -> VectorView:
+    return VectorView([view_factory(scenario, "protagonist", preset=PRESETS[scenario])])
+
+
+def env_step_ms(scenario: str, steps: int, seed: int = 0) -> float:
+    """Mean wall ms of one protagonist step of `scenario`'s view, random actions, no learner."""
+    venv = _venv(scenario)
+    venv.seed(seed)
+    venv.reset()
+    rng = np.random.default_rng(seed)
+    space = venv.action_space
+    actions = rng.uniform(space.low, space.high, (steps + 50, 1, *space.shape))
+    for a in actions[:50]:  # untimed: the first episode's start
+        venv.step(a.astype(space.dtype))
+    began = time.perf_counter()
+    for a in actions[50:]:
+        venv.step(a.astype(space.dtype))
+    elapsed = time.perf_counter() - began
+    venv.close()
+    return elapsed / steps * 1e3
+
+
+def _model(kind: str, scenario: str, start: int, warmup: int, seed: int) -> Any:
+    venv = _venv(scenario)
     if kind == "sac":
         config: Any = SACConfig(learning_starts=start)
     elif kind == "dbc":
@@ -64,9 +92,11 @@ def _model(kind: str, start: int, warmup: int, seed: int) -> Any:
     return model
 
 
-def rate(kind: str, args: argparse.Namespace, seed: int) -> tuple[float, dict[str, float]]:
-    """Learning steps per second of `kind` after its untimed start and warm-up."""
-    model = _model(kind, args.start, args.warmup, seed)
+def rate(
+    kind: str, scenario: str, args: argparse.Namespace, seed: int
+) -> tuple[float, dict[str, float]]:
+    """Learning steps per second of `kind` on `scenario` after its untimed start and warm-up."""
+    model = _model(kind, scenario, args.start, args.warmup, seed)
     clock: dict[str, float] = defaultdict(float)
     if kind.startswith("rsc"):
         for name in ("update_world_model", "_sac_step"):
@@ -87,29 +117,47 @@ def main() -> None:
     parser.add_argument("--start", type=int, default=200, help="random steps first (untimed)")
     parser.add_argument("--warmup", type=int, default=200, help="learning steps (untimed)")
     parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument(
+        "--scenarios", default="RS-LiftCausal", help=f"comma-separated, of {', '.join(PRESETS)}"
+    )
+    parser.add_argument("--kinds", default=",".join(KINDS), help="comma-separated learners")
     args = parser.parse_args()
+    scenarios, kinds = args.scenarios.split(","), args.kinds.split(",")
+    for name, given, known in (("scenario", scenarios, PRESETS), ("kind", kinds, KINDS)):
+        for value in given:
+            if value not in known:
+                parser.error(f"unknown {name} {value!r}; known: {', '.join(known)}")
     torch.set_num_threads(1)
     print(line(step_us(steps=5000, repeats=3), 5000, 3, os.getloadavg()[0]))
-    kinds = ("sac", "rsc", "rsc (F.gumbel_softmax)", "dbc")
-    rates: dict[str, list[float]] = defaultdict(list)
-    split: dict[str, float] = {}
+    rates: dict[tuple[str, str], list[float]] = defaultdict(list)
+    raw: dict[str, list[float]] = defaultdict(list)
+    split: dict[str, dict[str, float]] = {}
     for r in range(args.rounds):
+        for scenario in scenarios:
+            raw[scenario].append(env_step_ms(scenario, args.steps, seed=r))
+            print(f"round {r}: {scenario} raw step {raw[scenario][-1]:.2f} ms", flush=True)
+            for kind in kinds:
+                per_s, clock = rate(kind, scenario, args, seed=r)
+                rates[scenario, kind].append(per_s)
+                print(f"round {r}: {scenario} {kind:<22} {per_s:6.1f} learning steps/s", flush=True)
+                if kind == "rsc":
+                    split[scenario] = clock
+    for scenario in scenarios:
+        print(
+            f"\n{scenario} ({PRESETS[scenario]}), {args.steps} timed learning steps, "
+            f"{args.rounds} rounds; raw step {statistics.median(raw[scenario]):.2f} ms:"
+        )
         for kind in kinds:
-            per_s, clock = rate(kind, args, seed=r)
-            rates[kind].append(per_s)
-            print(f"round {r}: {kind:<22} {per_s:6.1f} learning steps/s", flush=True)
-            if kind == "rsc":
-                split = clock
-    print(f"\n{SCENARIO} ({PRESET}), {args.steps} timed learning steps, {args.rounds} rounds:")
-    for kind in kinds:
-        print(f"  {kind:<22} {statistics.median(rates[kind]):6.1f} learning steps/s")
-    wall = split["wall"]
-    world, sac = split.get("update_world_model", 0.0), split.get("_sac_step", 0.0)
-    print(
-        f"RSC's wall (last round, {wall:.1f} s): world model {world / wall:.0%}, SAC step "
-        f"{sac / wall:.0%}, the rest (augmentation, environment, collection) "
-        f"{1 - (world + sac) / wall:.0%}"
-    )
+            print(f"  {kind:<22} {statistics.median(rates[scenario, kind]):6.1f} learning steps/s")
+        if scenario in split:
+            wall = split[scenario]["wall"]
+            world = split[scenario].get("update_world_model", 0.0)
+            sac = split[scenario].get("_sac_step", 0.0)
+            print(
+                f"  RSC's wall (last round, {wall:.1f} s): world model {world / wall:.0%}, SAC "
+                f"step {sac / wall:.0%}, the rest (augmentation, environment, collection) "
+                f"{1 - (world + sac) / wall:.0%}"
+            )
     print(line(step_us(steps=5000, repeats=3), 5000, 3, os.getloadavg()[0]))
 
 

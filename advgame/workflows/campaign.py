@@ -244,8 +244,8 @@ def park_campaign(campaign: Campaign, out: str | Path) -> dict[str, int]:
     """Park every run of the campaign in training (``runs/``, not finished) in ``parked/``.
 
     Returns the iteration each was parked at. Safe while they train: each is parked at its
-    last checkpoint. Commit ``parked/`` to carry them to another checkout, where the train
-    stage resumes them (`advgame.workflows.park`).
+    last checkpoint. ``parked/`` stays in the work tree (git ignores it); the train stage
+    run there later resumes each run from its copy (`advgame.workflows.park`).
     """
     from advgame.workflows.park import PARKED, park_run
 
