@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from _common import clock_method
+from _common import clock_method, step_through
 from calibrate import line, step_us
 
 from advgame.agents import DBCConfig, RSCConfig, SACConfig
@@ -56,30 +56,27 @@ def _gumbel_softmax_graph(model: Any) -> None:
     world.sample_graph = sample_graph
 
 
-def _venv(scenario: str) -> VectorView:
-    return VectorView([view_factory(scenario, "protagonist", preset=PRESETS[scenario])])
+def _view(scenario: str) -> Any:
+    """A factory of `scenario`'s protagonist view under its campaign's training correlation."""
+    return view_factory(scenario, "protagonist", preset=PRESETS[scenario])
 
 
-def env_step_ms(scenario: str, steps: int, seed: int = 0) -> float:
+def env_step_ms(scenario: str, steps: int, seed: int = 0, untimed: int = 50) -> float:
     """Mean wall ms of one protagonist step of `scenario`'s view, random actions, no learner."""
-    venv = _venv(scenario)
-    venv.seed(seed)
-    venv.reset()
+    env = _view(scenario)()
+    env.reset(seed=seed)
+    space = env.action_space
     rng = np.random.default_rng(seed)
-    space = venv.action_space
-    actions = rng.uniform(space.low, space.high, (steps + 50, 1, *space.shape))
-    for a in actions[:50]:  # untimed: the first episode's start
-        venv.step(a.astype(space.dtype))
-    began = time.perf_counter()
-    for a in actions[50:]:
-        venv.step(a.astype(space.dtype))
-    elapsed = time.perf_counter() - began
-    venv.close()
+    actions = rng.uniform(space.low, space.high, (untimed + steps, *space.shape))
+    actions = actions.astype(space.dtype)
+    step_through(env, actions[:untimed])  # untimed: the first episode's start
+    elapsed = step_through(env, actions[untimed:])
+    env.close()
     return elapsed / steps * 1e3
 
 
 def _model(kind: str, scenario: str, start: int, warmup: int, seed: int) -> Any:
-    venv = _venv(scenario)
+    venv = VectorView([_view(scenario)])
     if kind == "sac":
         config: Any = SACConfig(learning_starts=start)
     elif kind == "dbc":
