@@ -215,8 +215,12 @@ def test_population_files_name_their_specs_by_old_paths_and_load() -> None:
     assert any(t.split(":")[0] in moved.MOVED for t in types)  # written before the move
     for t in types:
         assert load(t) is not None
-    pop = Population.load(files[0])
-    assert pop.members
+    # A protagonist-only run (SAC, RSC, DBC) writes an empty population; every file loads
+    # whole, and at least one of them holds members written before the move.
+    loaded = {f: Population.load(f) for f in files}
+    for f, pop in loaded.items():
+        assert len(pop.members) == len(json.loads(f.read_text())), f
+    assert any(pop.members for pop in loaded.values())
 
 
 def test_committed_part_files_load() -> None:
