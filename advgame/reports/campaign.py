@@ -2,12 +2,14 @@
 
 `campaign_table` is the last step of `advgame.workflows.campaign.run_campaign`; it reads the campaign's
 payoff table (``results/payoff.csv``) and its finished runs' progress files, and writes per
-method the median agent and the spread over seeds, a cost table for safe campaigns, and
+method the median agent and the spread over seeds, the mean return in each column of the
+table (``campaign_columns.csv``; a cost table in its place for safe campaigns), and
 ``curves.png`` (each method's mean training curve over its seeds).
 """
 
 from __future__ import annotations
 
+import csv
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -77,6 +79,8 @@ def campaign_table(campaign: CampaignGrid, out: Path, finished: Path) -> Path:
     text = _table_md(campaign, rows)
     if campaign.cost_limit is not None:
         text += "\n" + _cost_md(campaign, table.safety(campaign.cost_limit))
+    else:
+        text += "\n" + _columns_md(campaign, table.cells(), out / COLUMNS)
     if _curves(campaign, out, finished) is not None:
         text += (
             f"\n![training curves]({CURVES})\n\n[{CURVES}]({CURVES}): each method's training "
@@ -86,6 +90,9 @@ def campaign_table(campaign: CampaignGrid, out: Path, finished: Path) -> Path:
     md.write_text(text)
     return md
 
+
+COLUMNS = "campaign_columns.csv"
+"""Per method and column of the payoff table, the mean return over agents, beside ``campaign.md``."""
 
 CURVES = "curves.png"
 """The campaign's figure of training curves per method, beside ``campaign.md``."""
@@ -156,6 +163,50 @@ def _cost_md(campaign: CampaignGrid, cells: list[dict[str, Any]]) -> str:
         "half-width over agents; cost ≤ limit is the share of all the method's evaluation "
         "episodes within the limit.",
     ]
+    return "\n".join(lines) + "\n"
+
+
+def _columns_md(campaign: CampaignGrid, cells: list[dict[str, Any]], path: Path) -> str:
+    """Per method (a row) and column of the payoff table: the mean return over its agents.
+
+    Each agent's cell is the mean of its evaluation episodes; a method's entry is the mean of
+    its agents' cells with the Student-t 95 % half-width over them. Also written long-form to
+    `path` (method, column, agents, mean, ci95).
+    """
+    from advgame.evaluation import ci95
+
+    columns = list(dict.fromkeys(c["adversary"] for c in cells))
+    lines = [
+        "## Mean return per column",
+        "",
+        "| method | agents | " + " | ".join(columns) + " |",
+        "|" + "---|" * (len(columns) + 2),
+    ]
+    rows: list[list[Any]] = [["method", "column", "agents", "mean", "ci95"]]
+    for method in campaign.methods:
+        runs = set(campaign.method_runs(method))
+        mine = [c for c in cells if c["protagonist"] in runs]
+        if not mine:
+            continue
+        entries = []
+        for column in columns:
+            means = [c["mean"] for c in mine if c["adversary"] == column]
+            if not means:
+                entries.append("–")
+                continue
+            mean, half = float(np.mean(means)), ci95(means)
+            entries.append(_fmt(mean) if math.isnan(half) else f"{_fmt(mean)} ± {_fmt(half)}")
+            rows.append([method, column, len(means), mean, half])
+        agents = len({c["protagonist"] for c in mine})
+        lines.append(_row([method, agents, *entries]))
+    lines += [
+        "",
+        "Each entry is the mean over the method's agents of each agent's mean true return over "
+        "its evaluation episodes, ± the Student-t 95 % half-width over agents (none for "
+        f"one agent). Data: [{path.name}]({path.name}).",
+    ]
+    with path.open("w", newline="") as f:
+        csv.writer(f).writerows(rows)
     return "\n".join(lines) + "\n"
 
 

@@ -44,8 +44,9 @@ copy there, and its parked copy deleted once it is finished. It then evaluates e
 final protagonist in one table (finished evaluation units are read back, not replayed) and
 writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-adversaries
 return (attack and preset columns alike), the interquartile range and the 95 % interval over
-seeds of its natural and worst-of-adversaries returns; with a ``cost_limit`` (safe scenarios),
-per method and column the return and episode cost (means over seeds with 95 % intervals) and
+seeds of its natural and worst-of-adversaries returns; per method and column, the mean return
+over its agents (``campaign_columns.csv``); or, with a ``cost_limit`` (safe scenarios), per
+method and column the return and episode cost (means over seeds with 95 % intervals) and
 the share of evaluation episodes whose cost stays within the limit. ``status.json`` says at every step what is done.
 """
 
