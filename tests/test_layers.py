@@ -269,7 +269,7 @@ def test_a_committed_campaign_finds_its_part_files_by_the_keys_of_its_units(
     from advgame.core.registry import make
     from advgame.evaluation.attacks.optimal import OPTIMAL_GRID
     from advgame.evaluation.table.protagonists import run_protagonist
-    from advgame.runner.units import unit_key
+    from advgame.runner.parts import has_part
     from advgame.training.best_response import BestResponseJob, MixtureSpec
     from advgame.workflows.suite import observation_agent
 
@@ -287,7 +287,7 @@ def test_a_committed_campaign_finds_its_part_files_by_the_keys_of_its_units(
             name=f"ppo-s0/{k}", scenario="Hopper-v5", make_kwargs={"preset": "atla"},
             agent=agent, hparams=dict(hparams), opponents=opponents, steps=200_000, seed=k,
         )  # fmt: skip
-        assert (parts / f"{unit_key(unit)}.pkl").is_file(), k
+        assert has_part(parts, unit), k
 
 
 def test_a_released_agent_loads_and_plays(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

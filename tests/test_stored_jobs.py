@@ -10,17 +10,21 @@ lockstep group after it), and part files of lockstep groups written before per-j
 from __future__ import annotations
 
 import json
+import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from advgame.core.policy import CallablePolicy
 from advgame.evaluation import AdversarySetup, EvalJob, evaluate, lockstep_groups, population_jobs
 from advgame.evaluation.table.batched import LOCKSTEP_EPISODES
 from advgame.evaluation.table.running import run_unit
 from advgame.evaluation.table.stored import adopt_groups
+from advgame.runner.parts import part_key, unit_key
 from advgame.runner.run import run_units
-from advgame.runner.units import UnitRecord, read_part, unit_key, write_part
+from advgame.runner.units import UnitRecord, read_part, write_part
 
 ENV = "Hopper-v5"
 ROOT = Path(__file__).resolve().parents[1]
@@ -138,3 +142,70 @@ def test_a_group_part_that_does_not_line_up_is_left_alone(
     cells = {(j.protagonist, j.adversary) for j in old}
     assert adopt_groups(old, parts, cells) == 0
     assert _files(tmp_path) == {rec.key} and "not split per job" in caplog.text
+
+
+@dataclass(frozen=True)
+class FileHop:
+    """`hop` scaled by a gain read from a file: a spec that names a file, as checkpoints do."""
+
+    path: str
+
+    def __post_init__(self) -> None:
+        if not Path(self.path).is_file():  # as a spec may check (LocalModel does)
+            raise FileNotFoundError(self.path)
+
+    def build(self, info: object) -> CallablePolicy:
+        """The controller with the file's gain."""
+        gain = float(Path(self.path).read_text())
+        return CallablePolicy(lambda obs: np.clip(gain * hop(obs), -1.0, 1.0))
+
+
+def _file_jobs(path: str) -> list[EvalJob]:
+    setups = {"nominal": AdversarySetup.nominal()}
+    return population_jobs(ENV, {"file": FileHop(path)}, setups, seeds=(0,), episodes=1)
+
+
+def test_part_files_are_found_from_another_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A campaign run as ``zoo/x.toml`` from the root and as ``x.toml`` from ``zoo/`` alike."""
+    (tmp_path / "zoo" / "run").mkdir(parents=True)
+    (tmp_path / "zoo" / "run" / "gain.txt").write_text("0.5")
+    monkeypatch.chdir(tmp_path)
+    jobs = _file_jobs("zoo/run/gain.txt")  # the paths as given from the root
+    evaluate(jobs, workers=1, progress=False, results_dir=Path("zoo/results"))
+    (job,) = jobs
+    assert part_key(job, Path("zoo/results/parts")) != unit_key(job)  # the file is rebased
+    _mark(tmp_path / "zoo" / "results" / "parts", part_key(job, Path("zoo/results/parts")))
+    monkeypatch.chdir(tmp_path / "zoo")
+    again = _file_jobs("run/gain.txt")  # the same file, from zoo/
+    table = evaluate(again, workers=1, progress=False, results_dir=Path("results"))
+    assert _marked(table, again) == {("file", "nominal")}
+    assert _played(tmp_path / "zoo" / "results") == 0
+    moved = tmp_path / "elsewhere"  # the folder cloned elsewhere: run and results together
+    (tmp_path / "zoo").rename(moved)
+    monkeypatch.chdir(moved)
+    table = evaluate(
+        _file_jobs("run/gain.txt"), workers=1, progress=False, results_dir=Path("results")
+    )
+    assert _marked(table, again) == {("file", "nominal")}
+    other = _file_jobs(os.path.join("run", "gain.txt"))[0]
+    (moved / "run" / "gain.txt").unlink()  # a file that is not there any more: left as given
+    assert part_key(other, Path("results/parts")) == unit_key(other)
+
+
+def test_part_files_named_before_part_keys_are_read_back_and_renamed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    (tmp_path / "gain.txt").write_text("0.5")
+    monkeypatch.chdir(tmp_path)
+    jobs = _file_jobs("gain.txt")
+    evaluate(jobs, workers=1, progress=False, results_dir=tmp_path / "out")
+    parts = tmp_path / "out" / "parts"
+    (job,) = jobs
+    new, old = part_key(job, parts), unit_key(job)
+    _mark(parts, new)
+    (parts / f"{new}.pkl").rename(parts / f"{old}.pkl")  # named as before part_key
+    table = evaluate(jobs, workers=1, progress=False, results_dir=tmp_path / "out")
+    assert _marked(table, jobs) == {("file", "nominal")} and _played(tmp_path / "out") == 0
+    assert _files(tmp_path / "out") == {new}  # renamed: found from any folder from now on

@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from advgame.errors import AdvgameError, ConfigError
+from advgame.runner.parts import part_key, read_unit_part, unit_key
 from advgame.runner.units import (
     Options,
     UnitRecord,
@@ -45,9 +46,7 @@ from advgame.runner.units import (
     digest,
     drop_scratch,
     first_action,
-    read_part,
     ship,
-    unit_key,
 )
 
 __all__ = [
@@ -148,8 +147,10 @@ def run_units(
     if parts is not None:
         parts.mkdir(parents=True, exist_ok=True)
     needs_pickle = parts is not None or executor != "local" or (workers > 1 and len(units) > 1)
-    keys = [unit_key(u) if needs_pickle else f"unit-{i}" for i, u in enumerate(units)]
-    records: list[UnitRecord | None] = [read_part(parts, k) for k in keys]
+    keys = [part_key(u, parts) if needs_pickle else f"unit-{i}" for i, u in enumerate(units)]
+    records: list[UnitRecord | None] = [
+        read_unit_part(parts, u, k) for u, k in zip(units, keys, strict=True)
+    ]
     todo = [i for i, r in enumerate(records) if r is None]
     if len(todo) < len(units):
         log.info("%d of %d jobs already done in %s", len(units) - len(todo), len(units), parts)

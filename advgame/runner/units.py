@@ -25,7 +25,7 @@ from typing import Any
 
 from advgame.core.config import write_atomic
 from advgame.core.files import reading
-from advgame.core.moved import load_pickle, stable_pickle
+from advgame.core.moved import load_pickle
 from advgame.errors import ConfigError, FileFormatError
 from advgame.training.population import PATH_FIELDS
 
@@ -42,6 +42,7 @@ __all__ = [
     "retry",
     "ship",
     "timed",
+    "walk_files",
     "write_part",
 ]
 
@@ -90,23 +91,6 @@ def digest(blob: bytes) -> str:
     return hashlib.sha256(blob).hexdigest()[:24]
 
 
-def unit_key(unit: Any) -> str:
-    """The name of a unit's part file: the digest of its pickle written without a memo.
-
-    A plain pickle refers back to an object it has already written, so two equal units differ
-    when one shares a string between fields and the other holds two equal copies (a spec built
-    in this process vs. one read back from JSON): a resumed run would then miss its finished
-    part files and redo them. Without the memo the pickle depends on the values alone, and
-    `advgame.core.moved.stable_pickle` writes every class under its name before any module
-    moved, so reorganising the code renames no part file.
-    """
-    try:
-        return digest(stable_pickle(unit))
-    except Exception:
-        pickled(unit)  # a unit that cannot be pickled: a ConfigError saying what to change
-        raise
-
-
 # -- instrumenting the first action ---------------------------------------------------------
 _FIRST: list[float] = []
 
@@ -118,22 +102,28 @@ def first_action() -> None:
 
 
 # -- files travelling with units ------------------------------------------------------------
-def _walk(obj: Any, visit: Callable[[str, Any], Any]) -> Any:
-    """Rebuild `obj` with every file-naming dataclass field (`PATH_FIELDS`) through `visit`."""
+def walk_files(
+    obj: Any, visit: Callable[[str, Any], Any], rebuild: Callable[..., Any] = dataclasses.replace
+) -> Any:
+    """Rebuild `obj` with every file-naming dataclass field (`PATH_FIELDS`) through `visit`.
+
+    A dataclass with changed fields is rebuilt by ``rebuild(obj, **changes)``: by default
+    `dataclasses.replace`, which runs its checks again.
+    """
     if isinstance(obj, dict):
-        return {k: _walk(v, visit) for k, v in obj.items()}
+        return {k: walk_files(v, visit, rebuild) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return type(obj)(_walk(v, visit) for v in obj)
+        return type(obj)(walk_files(v, visit, rebuild) for v in obj)
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         changes = {}
         for f in dataclasses.fields(obj):
             if not f.init:
                 continue
             old = getattr(obj, f.name)
-            new = visit(f.name, old) if f.name in PATH_FIELDS else _walk(old, visit)
+            new = visit(f.name, old) if f.name in PATH_FIELDS else walk_files(old, visit, rebuild)
             if new is not old:
                 changes[f.name] = new
-        return dataclasses.replace(obj, **changes) if changes else obj
+        return rebuild(obj, **changes) if changes else obj
     return obj
 
 
@@ -146,7 +136,7 @@ def ship(unit: Any) -> dict[str, bytes]:
             files[value] = Path(value).read_bytes()
         return value
 
-    _walk(unit, grab)
+    walk_files(unit, grab)
     return files
 
 
@@ -162,7 +152,7 @@ def _materialize(unit: Any, files: dict[str, bytes]) -> Any:
             target.parent.mkdir(parents=True, exist_ok=True)
             write_atomic(target, blob)
         local[path] = str(target)
-    return _walk(unit, lambda _, v: local.get(v, v) if isinstance(v, str) else v)
+    return walk_files(unit, lambda _, v: local.get(v, v) if isinstance(v, str) else v)
 
 
 # -- what a worker runs ---------------------------------------------------------------------
@@ -226,7 +216,7 @@ def _forget_rewritten(unit: Any) -> None:
             _MTIMES[value] = mtime
         return value
 
-    _walk(unit, look)
+    walk_files(unit, look)
     checkpoint = sys.modules.get("advgame.agents.checkpoint")
     if changed and checkpoint is not None:
         log.info("a checkpoint changed on disk: reloading models in worker %d", os.getpid())

@@ -86,20 +86,20 @@ def search_status(campaign: Campaign, out: Path, done: Sequence[str]) -> dict[st
 
     ``{"trained", "candidates", "trained_steps", "steps"}``: candidates whose part file exists
     (`advgame.evaluation.attacks.optimal.candidate_jobs`), and their adversary steps, out of
-    all; what is left is what the evaluate stage still trains. Paths are `run_dir`'s, as the
-    evaluate stage gives them: call it with the same `out` from the same folder.
+    all; what is left is what the evaluate stage still trains. Part files are named with the
+    runs' files relative to them (`advgame.runner.parts.part_key`), so any folder will do.
     """
     search = campaign.search()
     if search is None:
         return None
     from advgame.evaluation.table.protagonists import run_protagonist
-    from advgame.runner.units import unit_key
+    from advgame.runner.parts import has_part
     from advgame.workflows.cells import search_jobs
 
     protagonists = {r: run_protagonist(run_dir(out, r))[1] for r in done}
     jobs = search_jobs(campaign.scenario, protagonists, search, threat=campaign.threat)
     parts = out / "results" / "optimal" / "parts"
-    have = [(parts / f"{unit_key(j)}.pkl").is_file() for j in jobs]
+    have = [has_part(parts, j) for j in jobs]
     return {
         "trained": sum(have),
         "candidates": len(jobs),

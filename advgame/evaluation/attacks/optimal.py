@@ -234,7 +234,7 @@ def candidate_jobs(
     """Every candidate the search trains: ``(protagonist, grid index, BestResponseJob)``.
 
     In training order, the long ones first. A candidate whose part file
-    (``<out>/optimal/parts/<unit_key(job)>.pkl``) exists is read back, not trained.
+    (``<out>/optimal/parts/<part_key(job)>.pkl``) exists is read back, not trained.
     """
     from advgame.core.registry import make
     from advgame.training.best_response import BestResponseJob, MixtureSpec

@@ -6,8 +6,8 @@ named after the unit. Named that way alone, a table played again with another ``
 with rows or columns added (which shift every lockstep group after them), would find none of its
 finished cells and play them again; and since batched and per-job play round differently in
 chaotic dynamics, the numbers would move in their last digits. So once a unit is played its
-rows are also kept per job (`store_jobs`, ``<parts>/<job key>.pkl``, the key `unit_key` gives
-the job), and a table reads its finished jobs back from those (`read_jobs`) before it cuts the
+rows are also kept per job (`store_jobs`, ``<parts>/<job key>.pkl``, the key `part_key` gives
+the job: its files named relative to ``parts``, so it holds from any folder), and a table reads its finished jobs back from those (`read_jobs`) before it cuts the
 rest into units. A unit that is its job (a whole job on a pool) is its own job part.
 
 `adopt_groups` splits part files of lockstep groups written before per-job parts existed into
@@ -25,7 +25,8 @@ from typing import Any
 
 from advgame.evaluation.table.batched import LOCKSTEP_EPISODES
 from advgame.evaluation.table.jobs import EvalJob, lockstep_groups, split_seeds
-from advgame.runner.units import UnitRecord, read_part, unit_key, write_part
+from advgame.runner.parts import part_key, read_unit_part
+from advgame.runner.units import UnitRecord, write_part
 
 __all__ = ["Layout", "adopt_earlier_table", "adopt_groups", "read_jobs", "store_jobs"]
 
@@ -36,7 +37,7 @@ def read_jobs(jobs: Sequence[EvalJob], parts: Path | None) -> list[UnitRecord | 
     """Each job's stored record (its rows in ``value``), None for a job not played yet."""
     if parts is None:
         return [None] * len(jobs)
-    return [read_part(parts, unit_key(j)) for j in jobs]
+    return [read_unit_part(parts, j) for j in jobs]
 
 
 @dataclasses.dataclass
@@ -95,7 +96,7 @@ def store_jobs(
     if parts is None:
         return rows
     unit_keys = {rec.key for rec in records}  # a whole job is its own part already
-    job_keys = {i: unit_key(jobs[i]) for i in rows}
+    job_keys = {i: part_key(jobs[i], parts) for i in rows}
     for i, job_rows in rows.items():
         if job_keys[i] not in unit_keys:
             write_part(parts, _job_record(job_keys[i], job_rows, source[i]))
@@ -135,7 +136,7 @@ def adopt_groups(jobs: Sequence[EvalJob], parts: Path, cells: Collection[tuple[s
     layout = Layout.groups([j for _, j in old], [i for i, _ in old])
     adopted = 0
     for unit, owners in zip(layout.units, layout.owners, strict=True):
-        rec = read_part(parts, unit_key(unit))
+        rec = read_unit_part(parts, unit)
         if rec is None:
             continue
         try:
