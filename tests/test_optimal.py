@@ -63,6 +63,12 @@ def test_a_checkpoint_gets_its_strongest_searched_adversary(
     assert main([*args, "--checkpoint", f"ppo={pendulum_ppo}:ppo", "--raw-obs", "ppo"]) == 0
     assert [p.stat().st_mtime_ns for p in sorted((out / "optimal" / "parts").iterdir())] == stamps
     assert f"(100 %), 0 s; 0 candidates to train, {n} read back" in capsys.readouterr().err
+    # ...and so are the candidates' selection cells: no episode played, the same one kept
+    selection = out / "optimal" / "selection"
+    assert len(list((selection / "parts").glob("*.pkl"))) == n
+    timings = [json.loads(ln) for ln in (selection / "jobs.jsonl").read_text().splitlines()]
+    assert len(timings) == n and all(t["attempts"] == 0 for t in timings)
+    assert json.loads((out / "optimal.json").read_text())["ppo"] == search
 
 
 def test_the_long_candidate_trains_first_with_its_scaled_budget(

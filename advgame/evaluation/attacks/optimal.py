@@ -5,8 +5,9 @@ trained by RL against the frozen policy, the strongest of a small hyper-paramete
 every protagonist of a table, whatever its kind (a run's, an SB3 checkpoint, a team, a zoo
 agent; only a fixed function has no networks to matter, and is attacked all the same), gets
 one `BestResponseJob` per point of `OPTIMAL_GRID`, trained as jobs on the executor (local pool
-or Ray, resumable through their part files); each candidate is then played for a few seeds and
-the one under which the protagonist's true return is lowest is kept. `optimal_jobs` gives the
+or Ray, resumable through their part files); each candidate is then played for a few seeds (its
+cells kept as part files in ``optimal/selection/``, read back on a rerun) and the one under
+which the protagonist's true return is lowest is kept. `optimal_jobs` gives the
 table's ``attack optimal`` column: one job per protagonist with its own adversary.
 """
 
@@ -41,6 +42,8 @@ log = logging.getLogger(__name__)
 
 OPTIMAL = "attack optimal"
 """The column name of the searched learned attack."""
+SELECTION = "selection"
+"""The folder under ``optimal/`` of the candidates' selection cells (part files, ``jobs.jsonl``)."""
 SB3_RECIPE: dict[str, Any] = {
     "n_envs": 4, "n_steps": 512, "batch_size": 64, "learning_rate": 3e-4,
     "lr_decay": False, "ent_coef": 0.0, "vf_coef": 0.5,
@@ -308,7 +311,9 @@ def _search(
                 adversary_specs={agent: c}, seeds=select)
         for name, ks in by_index.items() for k, c in sorted(ks.items())
     ]  # fmt: skip
-    table = evaluate(jobs, progress=False)
+    # kept as part files: a rerun reads the selection back (seconds rather than every
+    # candidate's episodes again) and keeps the same candidate, whatever its workers
+    table = evaluate(jobs, progress=False, results_dir=out / "optimal" / SELECTION)
     found = {}
     for name, ks in by_index.items():
         means = {k: float(np.mean(table.values(name, f"candidate {k}"))) for k in sorted(ks)}
