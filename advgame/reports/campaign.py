@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -144,9 +144,7 @@ def _cost_md(campaign: CampaignGrid, cells: list[dict[str, Any]]) -> str:
         "| method | column | seeds | return | ±95 % | episode cost | ±95 % | cost ≤ limit |",
         "|" + "---|" * 8,
     ]
-    for method in campaign.methods:
-        runs = set(campaign.method_runs(method))
-        mine = [c for c in cells if c["protagonist"] in runs]
+    for method, mine in _method_cells(campaign, cells):
         for column in dict.fromkeys(c["adversary"] for c in mine):
             sel = [c for c in mine if c["adversary"] == column]
             ret = [c["return"] for c in sel]
@@ -166,6 +164,15 @@ def _cost_md(campaign: CampaignGrid, cells: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _method_cells(
+    campaign: CampaignGrid, cells: list[dict[str, Any]]
+) -> Iterator[tuple[str, list[dict[str, Any]]]]:
+    """Each method, in table order, with the cells of its agents (`cells`' order)."""
+    for method in campaign.methods:
+        runs = set(campaign.method_runs(method))
+        yield method, [c for c in cells if c["protagonist"] in runs]
+
+
 def _columns_md(campaign: CampaignGrid, cells: list[dict[str, Any]], path: Path) -> str:
     """Per method (a row) and column of the payoff table: the mean return over its agents.
 
@@ -183,9 +190,7 @@ def _columns_md(campaign: CampaignGrid, cells: list[dict[str, Any]], path: Path)
         "|" + "---|" * (len(columns) + 2),
     ]
     rows: list[list[Any]] = [["method", "column", "agents", "mean", "ci95"]]
-    for method in campaign.methods:
-        runs = set(campaign.method_runs(method))
-        mine = [c for c in cells if c["protagonist"] in runs]
+    for method, mine in _method_cells(campaign, cells):
         if not mine:
             continue
         entries = []

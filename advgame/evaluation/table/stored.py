@@ -8,7 +8,8 @@ finished cells and play them again; and since batched and per-job play round dif
 chaotic dynamics, the numbers would move in their last digits. So once a unit is played its
 rows are also kept per job (`store_jobs`, ``<parts>/<job key>.pkl``, the key `part_key` gives
 the job: its files named relative to ``parts``, so it holds from any folder), and a table reads
-its finished jobs back from those (`read_jobs`) before it cuts the rest into units. A unit that is its job (a whole job on a pool) is its own job part.
+its finished jobs back from those (`read_jobs`) before it cuts the rest into units. A unit that
+is its job (a whole job on a pool) is its own job part.
 
 `adopt_groups` splits part files of lockstep groups written before per-job parts existed into
 per-job parts, given the cells of the table they were played for (`adopt_earlier_table`: the
