@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -80,6 +81,10 @@ def test_a_grid_trains_in_pieces_resumes_and_writes_the_table(
         assert run_dir(out, run) == out / "finished" / run and not (out / "runs" / run).exists()
         assert [f.name for f in (out / "finished" / run / "checkpoints").iterdir()] == ["iter_0001"]
         assert not (out / "finished" / run / "tb").exists()
+        with (out / "finished" / run / "learning.csv").open() as f:  # the logs' scalars stay
+            logged = {(r["writer"], r["tag"]) for r in csv.DictReader(f)}
+        assert ("loop", "loop/protagonist_phase_true_return") in logged
+        assert any(w.startswith("protagonist") and t.startswith("train/") for w, t in logged)
     assert main(["campaign", str(spec), "--workers", "2", "--no-progress"]) == 0
     assert _stamps(out, ["ppo-s0", "ppo-s1"]) == before  # finished runs are not trained again
     status = json.loads((out / "status.json").read_text())
@@ -427,7 +432,11 @@ def test_compact_keeps_the_last_checkpoint_without_its_replay_buffer(tmp_path: P
         folder.mkdir(parents=True)
         (folder / "protagonist.zip").write_bytes(b"model")
         (folder / "protagonist_replay.pkl").write_bytes(b"buffer")  # an off-policy learner's
-    (run / "tb").mkdir()
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(str(run / "tb" / "protagonist_0"))
+    writer.add_scalar("train/critic_loss", 2.5, 100)
+    writer.close()
     (run / "state.json").write_text(
         json.dumps({"iteration": 2, "checkpoint": "checkpoints/iter_0002"})
     )
@@ -438,3 +447,5 @@ def test_compact_keeps_the_last_checkpoint_without_its_replay_buffer(tmp_path: P
         "protagonist.zip"
     ]
     assert not (run / "tb").exists()
+    lines = (run / "learning.csv").read_text().splitlines()
+    assert lines == ["writer,tag,step,value", "protagonist_0,train/critic_loss,100,2.5"]

@@ -133,22 +133,25 @@ def _train_unit(unit: tuple[Any, str, str, bool | str]) -> str:
 def compact(run: Path) -> None:
     """Keep what a finished run is evaluated and released from: its last checkpoint.
 
-    Earlier checkpoint folders, TensorBoard logs and the off-policy learners' replay buffers
-    (only a resume reads one, and a finished run never trains again) are deleted, and the
-    population keeps the members whose files remain, so a finished run is a few hundred KB
+    Earlier checkpoint folders, TensorBoard's event files and the off-policy learners' replay
+    buffers (only a resume reads one, and a finished run never trains again) are deleted, and
+    the population keeps the members whose files remain, so a finished run is a few hundred KB
     (a few MB for the 256-wide networks of OMPO, RSC and DBC) that can be committed
     (``config.json``, ``state.json``, ``population.json``, ``progress.csv``, the last
-    checkpoint).
+    checkpoint). The learners' logged scalars (losses, temperature, fps) stay, as
+    ``learning.csv`` (`advgame.training.scalars.export_scalars`).
     """
     import shutil
 
     from advgame.training.population import Population
+    from advgame.training.scalars import export_scalars
 
     state = read_json(run / "state.json", "run state", ("checkpoint",))
     last = (run / state["checkpoint"]).resolve()
     for folder in (run / "checkpoints").iterdir():
         if folder.resolve() != last:
             shutil.rmtree(folder)
+    export_scalars(run / "tb", run / "learning.csv")
     shutil.rmtree(run / "tb", ignore_errors=True)
     for replay in last.glob("*_replay.pkl"):
         replay.unlink()
