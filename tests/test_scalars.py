@@ -64,4 +64,8 @@ def test_no_scalars_write_no_file(tmp_path: Path) -> None:
     assert export_scalars(tmp_path / "missing", out) == 0
     (tmp_path / "empty").mkdir()
     assert export_scalars(tmp_path / "empty", out) == 0
+    damaged = tmp_path / "damaged" / "protagonist_0"  # not an event file: read as no records
+    damaged.mkdir(parents=True)
+    (damaged / "events.out.tfevents.1.host.1.1").write_bytes(bytes(range(256)) * 2)
+    assert export_scalars(tmp_path / "damaged", out) == 0
     assert not out.exists()
