@@ -38,20 +38,20 @@ def _number(value: Any) -> float | None:
     return None
 
 
-def _writer_rows(folder: Path, files: list[Path]) -> dict[str, list[tuple[int, float]]]:
-    """Each tag's ``(step, value)`` series in one writer's folder, the last attempt kept."""
+def _writer_rows(files: list[Path]) -> dict[str, list[tuple[int, float]]]:
+    """Each tag's ``(step, value)`` series in one writer's event `files`, the last attempt kept."""
     from tensorboard.backend.event_processing.event_file_loader import LegacyEventFileLoader
 
-    events: list[tuple[float, int, int, str, int, float]] = []
-    for order, path in enumerate(files):
-        for seq, event in enumerate(LegacyEventFileLoader(str(path)).Load()):
+    events: list[tuple[float, str, int, float]] = []
+    for path in files:
+        for event in LegacyEventFileLoader(str(path)).Load():
             for value in event.summary.value:
                 number = _number(value)
                 if number is not None:
-                    events.append((event.wall_time, order, seq, value.tag, event.step, number))
-    events.sort(key=lambda e: e[:3])
+                    events.append((event.wall_time, value.tag, event.step, number))
+    events.sort(key=lambda e: e[0])  # stable: ties keep the files' and the records' order
     series: dict[str, list[tuple[int, float]]] = {}
-    for _, _, _, tag, step, number in events:
+    for _, tag, step, number in events:
         kept = series.setdefault(tag, [])
         while kept and kept[-1][0] >= step:  # a resumed process wrote these steps again
             kept.pop()
@@ -68,11 +68,14 @@ def scalar_rows(tb: str | Path) -> list[tuple[str, str, int, float]]:
     tb = Path(tb)
     if not tb.is_dir():
         return []
+    writers: dict[Path, list[Path]] = {}
+    for path in sorted(tb.rglob("events.out.tfevents.*")):
+        if path.is_file():
+            writers.setdefault(path.parent, []).append(path)
     rows: list[tuple[str, str, int, float]] = []
-    for folder in sorted({p.parent for p in tb.rglob("events.out.tfevents.*") if p.is_file()}):
-        files = sorted(folder.glob("events.out.tfevents.*"))
+    for folder, files in sorted(writers.items()):
         writer = folder.relative_to(tb).as_posix()
-        for tag, points in sorted(_writer_rows(folder, files).items()):
+        for tag, points in sorted(_writer_rows(files).items()):
             rows.extend((writer, tag, step, value) for step, value in points)
     return rows
 
