@@ -44,8 +44,24 @@ def test_lines_come_at_the_interval_and_at_milestones_with_an_estimate() -> None
     assert (
         out.getvalue()
         .splitlines()[-1]
-        .endswith("1,000/1,000 steps (100 %), 1.5 min; iteration 2/10")
+        .endswith("1,000/1,000 steps (100 %), 1.5 min; last: iteration 2/10")
+    )  # the closing line is not the milestone's: it says which milestone came last
+
+
+def test_a_timed_line_after_a_milestone_says_it_is_the_last_one() -> None:
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(1000, "train X", unit="step", interval=60, stream=out, clock=clock)
+    clock.now = 10
+    bar.set_postfix_str("iteration 1/10 in 10 s", refresh=False)
+    bar.update(100)  # the milestone's own line
+    clock.now = 80
+    bar.update(50)  # mid-iteration, after the interval
+    first, second = out.getvalue().splitlines()
+    assert first.endswith(
+        "100/1,000 steps (10 %), 10 s, about 1.5 min left; iteration 1/10 in 10 s"
     )
+    assert "150/1,000 steps (15 %)" in second
+    assert second.endswith("; last: iteration 1/10 in 10 s")
 
 
 def test_the_estimate_follows_the_recent_rate_after_a_pause() -> None:

@@ -5,9 +5,11 @@ file, where a bar is either silent or a single line of carriage returns. `progre
 tqdm bar when the stream is a terminal and a `LineProgress` otherwise: one line with the
 time, the count, the share done, the elapsed time and an estimate of what is left, at most every
 `LineProgress.interval` seconds and whenever a caller marks a milestone (`set_postfix_str`,
-e.g. an iteration or a unit finished). Both have tqdm's ``update``, ``set_postfix_str`` and
-``close``, so callers drive either the same way; as with tqdm, a milestone that comes with a
-count is ``set_postfix_str(text, refresh=False)`` then ``update(n)``: one line, with both.
+e.g. an iteration or a unit finished); lines between milestones repeat the last one as
+``last: ...``, so a count in the middle of an iteration does not read as that iteration's end.
+Both have tqdm's ``update``, ``set_postfix_str`` and ``close``, so callers drive either the same
+way; as with tqdm, a milestone that comes with a count is ``set_postfix_str(text,
+refresh=False)`` then ``update(n)``: one line, with both.
 """
 
 from __future__ import annotations
@@ -86,6 +88,8 @@ class LineProgress:
         self.postfix = ""
         self.pending = False
         """A milestone set without a line (``refresh=False``): the next `update` writes it."""
+        self.marked = False
+        """Whether the next line is the milestone's own: later lines show it as ``last: ...``."""
         self.written = self.n
         self.marks: deque[tuple[float, int]] = deque([(self.start, self.n)], maxlen=WINDOW)
         """(time, count) at the last lines: the estimate uses the rate since the oldest, so a
@@ -111,6 +115,7 @@ class LineProgress:
         signature: a milestone that comes with a count is then one line).
         """
         self.postfix = text
+        self.marked = True
         if refresh:
             self.write()
         else:
@@ -131,7 +136,9 @@ class LineProgress:
         if self.estimate and count < self.n < self.total:
             left = (self.total - self.n) * (now - since) / (self.n - count)
             text += f", about {_duration(left)} left"
-        return f"{text}; {self.postfix}" if self.postfix else text
+        if not self.postfix:
+            return text
+        return f"{text}; {self.postfix}" if self.marked else f"{text}; last: {self.postfix}"
 
     def write(self) -> None:
         """Write the current line, time-stamped, and flush."""
@@ -139,6 +146,7 @@ class LineProgress:
         stamp = time.strftime("%H:%M:%S")
         print(f"[{stamp}] {self.line()}", file=stream, flush=True)
         self.last, self.written, self.pending = self.clock(), self.n, False
+        self.marked = False
         self.marks.append((self.last, self.n))
 
 
