@@ -87,9 +87,8 @@ class LineProgress:
         self.start = self.last = clock()
         self.postfix = ""
         self.pending = False
-        """A milestone set without a line (``refresh=False``): the next `update` writes it."""
-        self.marked = False
-        """Whether the next line is the milestone's own: later lines show it as ``last: ...``."""
+        """A milestone not written yet: the next line is its own (with ``refresh=False``, the next
+        `update` writes it); lines after it show it as ``last: ...``."""
         self.written = self.n
         self.marks: deque[tuple[float, int]] = deque([(self.start, self.n)], maxlen=WINDOW)
         """(time, count) at the last lines: the estimate uses the rate since the oldest, so a
@@ -109,17 +108,15 @@ class LineProgress:
         self.marks = deque(((t, c + n) for t, c in self.marks), maxlen=WINDOW)
 
     def set_postfix_str(self, text: str = "", refresh: bool = True) -> None:
-        """Mark a milestone: `text` ends this and later lines.
+        """Mark a milestone: `text` ends its line, and later lines as ``last: text``.
 
         A line is written now, or with ``refresh=False`` at the next `update` (tqdm's
         signature: a milestone that comes with a count is then one line).
         """
         self.postfix = text
-        self.marked = True
+        self.pending = True
         if refresh:
             self.write()
-        else:
-            self.pending = True
 
     def close(self) -> None:
         """Write a last line if the count moved since the previous one."""
@@ -138,7 +135,7 @@ class LineProgress:
             text += f", about {_duration(left)} left"
         if not self.postfix:
             return text
-        return f"{text}; {self.postfix}" if self.marked else f"{text}; last: {self.postfix}"
+        return f"{text}; {self.postfix}" if self.pending else f"{text}; last: {self.postfix}"
 
     def write(self) -> None:
         """Write the current line, time-stamped, and flush."""
@@ -146,7 +143,6 @@ class LineProgress:
         stamp = time.strftime("%H:%M:%S")
         print(f"[{stamp}] {self.line()}", file=stream, flush=True)
         self.last, self.written, self.pending = self.clock(), self.n, False
-        self.marked = False
         self.marks.append((self.last, self.n))
 
 
