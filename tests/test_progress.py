@@ -157,6 +157,20 @@ def test_run_units_names_each_finished_unit_and_those_read_back(tmp_path: Path) 
     assert lines.n == lines.initial == 4  # a plain LineProgress counts read-back units as before
 
 
+def test_run_units_hands_each_record_to_on_unit_as_it_finishes(tmp_path: Path) -> None:
+    seen: list[tuple[int, int, int]] = []
+
+    def keep(index: int, rec: object) -> None:
+        files = sorted(p.name for p in tmp_path.glob("*.pkl"))
+        seen.append((index, rec.value, len(files)))  # type: ignore[attr-defined]
+
+    run_units(abs, [-3, -1], parts_dir=tmp_path, on_unit=keep)
+    assert seen == [(0, 3, 1), (1, 1, 2)]  # each after its own part file is written
+    seen.clear()
+    run_units(abs, [-4, -1, -3], parts_dir=tmp_path, on_unit=keep)
+    assert seen == [(1, 1, 2), (2, 3, 2), (0, 4, 3)]  # read back first, then the new one
+
+
 def test_a_training_run_logs_a_line_per_iteration(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -4,7 +4,8 @@ Real Hopper games with a fixed controller. A stored job's rows are marked (their
 value no episode returns), so a cell read back can be told from a cell played again: the marks
 must survive a second table with another ``workers``, one with a column added (which shifts every
 lockstep group after it), and part files of lockstep groups written before per-job parts existed
-(`adopt_groups`).
+(`adopt_groups`). A table stopped half-way keeps the cells it finished, per job, and a
+restart with other units plays only the rest.
 """
 
 from __future__ import annotations
@@ -21,9 +22,9 @@ from advgame.core.policy import CallablePolicy
 from advgame.evaluation import AdversarySetup, EvalJob, evaluate, lockstep_groups, population_jobs
 from advgame.evaluation.table.batched import LOCKSTEP_EPISODES
 from advgame.evaluation.table.running import run_unit
-from advgame.evaluation.table.stored import adopt_groups
+from advgame.evaluation.table.stored import adopt_groups, read_jobs
 from advgame.runner.parts import part_key, unit_key
-from advgame.runner.run import run_units
+from advgame.runner.run import JobFailedError, run_units
 from advgame.runner.units import UnitRecord, read_part, write_part
 
 ENV = "Hopper-v5"
@@ -111,6 +112,44 @@ def test_seed_units_on_a_pool_become_job_parts(tmp_path: Path, pool_imports: Non
     assert pooled.rows == here.rows
     again = evaluate(jobs, workers=1, progress=False, results_dir=tmp_path)
     assert _played(tmp_path) == 0 and again.rows == pooled.rows
+
+
+def broken(obs: np.ndarray) -> np.ndarray:
+    """A controller that fails on its first move (module level: pool workers import it)."""
+    raise ValueError("broken controller")
+
+
+def test_a_stopped_table_keeps_its_finished_groups_per_job(
+    tmp_path: Path, pool_imports: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr("advgame.evaluation.table.stored.LOCKSTEP_EPISODES", 4)
+    good = _jobs("nominal", "gauss")  # 4 jobs of 2 episodes: two groups of two
+    setups = {"nominal": AdversarySetup.nominal()}
+    bad = population_jobs(ENV, {"broken": broken}, setups, seeds=(0, 1), episodes=1)
+    with pytest.raises(JobFailedError, match="broken controller"):
+        evaluate(good + bad, workers=1, progress=False, results_dir=tmp_path)
+    parts = tmp_path / "parts"
+    assert all(r is not None for r in read_jobs(good, parts))  # what --status counts
+    assert _files(tmp_path) == {unit_key(j) for j in good}  # the groups' own files are gone
+    for j in good:
+        _mark(parts, unit_key(j))
+    again = evaluate(good, workers=2, progress=False, results_dir=tmp_path)  # other units
+    assert _marked(again, good) == {(j.protagonist, j.adversary) for j in good}
+    assert _played(tmp_path) == 0
+
+
+def test_a_table_counts_episodes_and_writes_a_line_per_group(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr("advgame.evaluation.table.stored.LOCKSTEP_EPISODES", 4)
+    jobs = _jobs("nominal", "gauss")
+    evaluate(jobs[:2], workers=1, progress=False, results_dir=tmp_path)  # one group played
+    capsys.readouterr()
+    evaluate(jobs, workers=1, progress=True, results_dir=tmp_path)  # stderr is a file: lines
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "evaluate (" in ln]
+    assert len(lines) == 1, lines  # one group left, its own line
+    assert "evaluate (2 of 4 cells read back): 8/8 episodes (100 %)" in lines[0]
+    assert lines[0].endswith("1 of 1 groups played (2 cells)")
 
 
 def test_lockstep_group_parts_of_an_earlier_table_are_adopted(tmp_path: Path) -> None:

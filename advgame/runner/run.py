@@ -110,6 +110,7 @@ def run_units(
     start_method: str = "forkserver",
     progress: Any = None,
     scratch: bool = False,
+    on_unit: Callable[[int, UnitRecord], None] | None = None,
 ) -> list[UnitRecord]:
     """Run ``fn(unit)`` for every unit on `executor`; return one `UnitRecord` per unit, in order.
 
@@ -140,6 +141,11 @@ def run_units(
             where it was interrupted (its episodes restart at the save), so this is for long
             units where that is the lesser cost (the optimal attack's candidates), not for
             runs that promise the result of an uninterrupted run (PSRO).
+        on_unit: called in this process as ``on_unit(index, record)`` for every unit: those
+            read back from part files first, then each run here the moment its part file is
+            written, so a caller can keep what finished units mean to it (the evaluation's
+            per-job part files) before the call returns or is interrupted. Units with the
+            same key are reported under one index.
 
     """
     _check(executor, workers, max_retries, start_method)
@@ -154,10 +160,10 @@ def run_units(
     todo = [i for i, r in enumerate(records) if r is None]
     if len(todo) < len(units):
         log.info("%d of %d jobs already done in %s", len(units) - len(todo), len(units), parts)
-    ticks = _Ticks(progress, keys)
+    ticks = _Ticks(progress, keys, on_unit)
     for i, r in enumerate(records):
         if r is not None:
-            ticks.done(keys[i], before=True)
+            ticks.done(keys[i], before=True, record=r)
             drop_scratch(parts, keys[i])  # a kill between its part file and the folder's removal
     ticks.started(len(todo))
     ship_files = executor == "ray" if ship_files is None else ship_files
@@ -177,14 +183,22 @@ def run_units(
 
 
 class _Ticks:
-    """Tells `run_units`' progress object about each finished unit (see its `progress`)."""
+    """Tells `run_units`' progress object and `on_unit` about each finished unit."""
 
-    def __init__(self, progress: Any, keys: Sequence[str]) -> None:
+    def __init__(
+        self,
+        progress: Any,
+        keys: Sequence[str],
+        on_unit: Callable[[int, UnitRecord], None] | None = None,
+    ) -> None:
         self.progress = progress
         self.index = {k: i for i, k in enumerate(keys)}
+        self.on_unit = on_unit
 
-    def done(self, key: str, before: bool = False) -> None:
-        """Unit `key` finished (`before`: read back from its part file)."""
+    def done(self, key: str, before: bool = False, record: UnitRecord | None = None) -> None:
+        """Unit `key` finished (`before`: read back from its part file) with `record`."""
+        if self.on_unit is not None and record is not None:
+            self.on_unit(self.index[key], record)
         if self.progress is None:
             return
         hook = getattr(self.progress, "unit_done", None)

@@ -287,7 +287,7 @@ class Options:
     ship_files: bool
     start_method: str
     progress: Any
-    """What a finished unit is reported to (``done(key)``; `advgame.runner.run`)."""
+    """What a finished unit is reported to (``done(key, record=...)``; `advgame.runner.run`)."""
     scratch: bool = False
     """Give each unit a scratch folder beside its part file (`scratch_dir`)."""
 
@@ -301,7 +301,7 @@ def finish(rec: UnitRecord, out: dict[str, Any], opts: Options) -> UnitRecord:
     write_part(opts.parts, rec)
     drop_scratch(opts.parts, rec.key)
     if opts.progress is not None:
-        opts.progress.done(rec.key)
+        opts.progress.done(rec.key, record=rec)
     return rec
 
 

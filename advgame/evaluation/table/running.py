@@ -23,7 +23,7 @@ from advgame.errors import ConfigError
 from advgame.evaluation.table.applicable import Rows, learn_ahead, not_applicable
 from advgame.evaluation.table.jobs import EvalJob, unit_size
 from advgame.evaluation.table.payoff import PayoffTable
-from advgame.evaluation.table.stored import Layout, read_jobs, store_jobs
+from advgame.evaluation.table.stored import JobParts, Layout, read_jobs
 from advgame.runner.run import EXECUTORS, first_action, run_units, write_timings
 
 __all__ = ["evaluate", "run_job", "run_unit", "use_executor"]
@@ -217,18 +217,55 @@ def evaluate(
     if kept:
         log.info("%d of %d jobs read back from %s", kept, len(jobs), parts)
     what = f"evaluate ({kept} of {len(jobs)} cells read back)" if kept else "evaluate"
-    bar = progress_display(len(layout.units), what, show=progress)
+    before = sum(len(j.seeds) * j.episodes for j, r in zip(jobs, stored, strict=True) if r)
+    shown = _EpisodeProgress(
+        layout, what, progress, before, milestones=len(layout.units) < len(todo)
+    )
+    kept_parts = JobParts(jobs, layout, parts)
     try:
         records = run_units(run_unit, layout.units, executor=kind, workers=workers,
                             address=address, max_retries=max_retries, parts_dir=parts,
-                            ship_files=ship_files, start_method=start_method, progress=bar)  # fmt: skip
+                            ship_files=ship_files, start_method=start_method, progress=shown,
+                            on_unit=kept_parts.add)  # fmt: skip
     finally:
-        bar.close()
-    played = store_jobs(jobs, layout, records, parts)
+        shown.bar.close()
+    for unit, rec in enumerate(records):  # units that share a key were reported once
+        kept_parts.add(unit, rec)
+    played = kept_parts.rows
     if out is not None:
         write_timings([r for r in stored if r is not None] + records, out / "jobs.jsonl")
     rows = [played[i] if r is None else r.value for i, r in enumerate(stored)]
     return PayoffTable((row for job_rows in rows for row in job_rows), na)
+
+
+class _EpisodeProgress:
+    """A table's progress counted in episodes (its units differ in size: groups, seeds).
+
+    `before` episodes were read back from job part files (counted, not in the rate). With
+    `milestones` (units that hold several cells: lockstep groups in this process, minutes
+    each), every finished unit writes its own line, so a log shows each one.
+    """
+
+    def __init__(
+        self, layout: Layout, what: str, show: bool, before: int, milestones: bool
+    ) -> None:
+        self.sizes = [sum(n for _, n in owners) for owners in layout.owners]
+        self.cells = [len(owners) for owners in layout.owners]
+        self.milestones = milestones
+        self.played = 0
+        self.bar = progress_display(before + sum(self.sizes), what, unit="episode",
+                                    initial=before, show=show)  # fmt: skip
+
+    def unit_done(self, index: int, before: bool) -> None:
+        """Unit `index` finished (`before`: read back from its part file)."""
+        if before:  # not this run's rate (`LineProgress.skip`; a tqdm bar just counts)
+            getattr(self.bar, "skip", self.bar.update)(self.sizes[index])
+            return
+        self.played += 1
+        if self.milestones:
+            self.bar.set_postfix_str(f"{self.played} of {len(self.sizes)} groups played "
+                                     f"({self.cells[index]} cells)", refresh=False)  # fmt: skip
+        self.bar.update(self.sizes[index])
 
 
 def _not_applicable(

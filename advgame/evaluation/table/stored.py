@@ -6,10 +6,12 @@ named after the unit. Named that way alone, a table played again with another ``
 with rows or columns added (which shift every lockstep group after them), would find none of its
 finished cells and play them again; and since batched and per-job play round differently in
 chaotic dynamics, the numbers would move in their last digits. So once a unit is played its
-rows are also kept per job (`store_jobs`, ``<parts>/<job key>.pkl``, the key `part_key` gives
+rows are also kept per job (`JobParts`, ``<parts>/<job key>.pkl``, the key `part_key` gives
 the job: its files named relative to ``parts``, so it holds from any folder), and a table reads
-its finished jobs back from those (`read_jobs`) before it cuts the rest into units. A unit that
-is its job (a whole job on a pool) is its own job part.
+its finished jobs back from those (`read_jobs`) before it cuts the rest into units. A job's part
+is written as soon as its last unit finishes, not at the end of the table, so an interrupted
+table keeps its finished cells whatever units play the rest. A unit that is its job (a whole job
+on a pool) is its own job part.
 
 `adopt_groups` splits part files of lockstep groups written before per-job parts existed into
 per-job parts, given the cells of the table they were played for (`adopt_earlier_table`: the
@@ -29,7 +31,14 @@ from advgame.evaluation.table.jobs import EvalJob, lockstep_groups, split_seeds
 from advgame.runner.parts import part_key, read_unit_part
 from advgame.runner.units import UnitRecord, write_part
 
-__all__ = ["Layout", "adopt_earlier_table", "adopt_groups", "read_jobs", "store_jobs"]
+__all__ = [
+    "JobParts",
+    "Layout",
+    "adopt_earlier_table",
+    "adopt_groups",
+    "read_jobs",
+    "store_jobs",
+]
 
 log = logging.getLogger(__name__)
 
@@ -74,36 +83,73 @@ def _rows(job: EvalJob) -> int:
     return len(job.seeds) * job.episodes
 
 
+class JobParts:
+    """Each job's rows, kept in its part file the moment the last unit holding them is in.
+
+    Fed every unit's record once (`add`, as `advgame.runner.run.run_units` reports them through
+    ``on_unit``), so a table interrupted half-way keeps its finished cells per job: a restart
+    with other units (another ``workers``) reads them back, and ``advgame campaign --status``
+    counts them. A unit part whose jobs are all kept is removed; a unit that is its whole job
+    is its own job part already.
+    """
+
+    def __init__(self, jobs: Sequence[EvalJob], layout: Layout, parts: Path | None) -> None:
+        self.jobs, self.layout, self.parts = jobs, layout, parts
+        self.rows: dict[int, list[dict[str, Any]]] = {}
+        """The rows of each job whose units are all in, by job index."""
+        self._waiting: dict[int, int] = {}
+        for owners in layout.owners:
+            for i, _ in owners:
+                self._waiting[i] = self._waiting.get(i, 0) + 1
+        self._chunks: dict[int, dict[int, list[dict[str, Any]]]] = {}
+        self._records: dict[int, UnitRecord] = {}
+
+    def add(self, unit: int, rec: UnitRecord) -> None:
+        """Unit number `unit` of the layout finished with `rec` (a unit given again is ignored)."""
+        if unit in self._records:
+            return
+        self._records[unit] = rec
+        at = 0
+        for i, n in self.layout.owners[unit]:
+            chunk = rec.value[at : at + n]
+            at += n
+            _check(self.jobs[i], chunk, n, self.layout.units[unit])
+            self._chunks.setdefault(i, {})[unit] = chunk
+            self._waiting[i] -= 1
+        if at != len(rec.value):
+            raise RuntimeError(f"unit {rec.key} has {len(rec.value)} rows, its jobs {at}")
+        for i, _ in self.layout.owners[unit]:
+            if not self._waiting[i]:
+                self._keep(i)
+
+    def _keep(self, i: int) -> None:
+        """Job `i`'s units are all in: join its rows in the units' order, write its part."""
+        chunks = self._chunks.pop(i)
+        self.rows[i] = [row for u in sorted(chunks) for row in chunks[u]]
+        if self.parts is None:
+            return
+        key = part_key(self.jobs[i], self.parts)
+        sources = [self._records[u] for u in sorted(chunks)]
+        if [r.key for r in sources] != [key]:  # not a unit that is its whole job
+            write_part(self.parts, _job_record(key, self.rows[i], sources[-1]))
+        for u in chunks:
+            owned = self.layout.owners[u]
+            mine = {part_key(self.jobs[j], self.parts) for j, _ in owned}
+            if all(j in self.rows for j, _ in owned) and self._records[u].key not in mine:
+                (self.parts / f"{self._records[u].key}.pkl").unlink(missing_ok=True)
+
+
 def store_jobs(
     jobs: Sequence[EvalJob], layout: Layout, records: Sequence[UnitRecord], parts: Path | None
 ) -> dict[int, list[dict[str, Any]]]:
     """Split the units' rows per job; keep each job's in its own part file; return them by index.
 
-    A unit part whose rows are now all in job parts is removed (the job parts hold its result);
-    a unit that is a whole job is its own job part already.
+    `JobParts` fed every record at once (the units of an earlier table, `adopt_groups`).
     """
-    rows: dict[int, list[dict[str, Any]]] = {}
-    source: dict[int, UnitRecord] = {}
-    for unit, owners, rec in zip(layout.units, layout.owners, records, strict=True):
-        at = 0
-        for i, n in owners:
-            chunk = rec.value[at : at + n]
-            at += n
-            _check(jobs[i], chunk, n, unit)
-            rows.setdefault(i, []).extend(chunk)
-            source[i] = rec
-        if at != len(rec.value):
-            raise RuntimeError(f"unit {rec.key} has {len(rec.value)} rows, its jobs {at}")
-    if parts is None:
-        return rows
-    unit_keys = {rec.key for rec in records}  # a whole job is its own part already
-    job_keys = {i: part_key(jobs[i], parts) for i in rows}
-    for i, job_rows in rows.items():
-        if job_keys[i] not in unit_keys:
-            write_part(parts, _job_record(job_keys[i], job_rows, source[i]))
-    for key in unit_keys - set(job_keys.values()):
-        (parts / f"{key}.pkl").unlink(missing_ok=True)
-    return rows
+    kept = JobParts(jobs, layout, parts)
+    for unit, rec in enumerate(records):
+        kept.add(unit, rec)
+    return kept.rows
 
 
 def _job_record(key: str, rows: list[dict[str, Any]], unit: UnitRecord) -> UnitRecord:
