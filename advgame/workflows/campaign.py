@@ -48,6 +48,8 @@ seeds of its natural and worst-of-adversaries returns; per method and column, th
 over its agents (``campaign_columns.csv``); or, with a ``cost_limit`` (safe scenarios), per
 method and column the return and episode cost (means over seeds with 95 % intervals) and
 the share of evaluation episodes whose cost stays within the limit. ``status.json`` says at every step what is done.
+The train stage claims each run it trains (`advgame.workflows.claims`), so a second train
+stage started beside it leaves those runs alone and trains only the others.
 """
 
 from __future__ import annotations
@@ -72,6 +74,7 @@ from advgame.workflows.campaign_status import (
     write_status,
 )
 from advgame.workflows.campaign_status import progress as _progress
+from advgame.workflows.claims import claimed
 
 __all__ = [
     "FINISHED",
@@ -202,21 +205,24 @@ def run_campaign(
             raise ConfigError(
                 f"No run {unknown[0]!r} in the campaign; its runs: {', '.join(campaign.runs())}."
             )
-        _unpark(out, names)
-        todo = [r for r in names if _progress(run_dir(out, r)) < campaign.config(r).iterations]
-        todo = todo[:max_runs] if max_runs is not None else todo
-        write_status(campaign, out, training=todo)
-        if todo:
-            log.info("campaign: training %d run(s): %s", len(todo), todo)
-            show = "lines" if progress else False
-            units = [
-                (campaign.config(r), str(out / "runs" / r), str(out / FINISHED / r), show)
-                for r in todo
-            ]
-            run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
-                      address=address, max_retries=1,
-                      progress=_StatusEach(campaign, out, todo, progress))  # fmt: skip
-            _unpark(out, todo)  # the runs that finished drop their parked copies
+        with claimed(out, [r for r in names if not (out / FINISHED / r).exists()]) as mine:
+            _left_to_others(out, [r for r in names if r not in mine], names)
+            names = [r for r in names if r in mine or (out / FINISHED / r).exists()]
+            _unpark(out, names)
+            todo = [r for r in names if _progress(run_dir(out, r)) < campaign.config(r).iterations]
+            todo = todo[:max_runs] if max_runs is not None else todo
+            write_status(campaign, out, training=todo)
+            if todo:
+                log.info("campaign: training %d run(s): %s", len(todo), todo)
+                show = "lines" if progress else False
+                units = [
+                    (campaign.config(r), str(out / "runs" / r), str(out / FINISHED / r), show)
+                    for r in todo
+                ]
+                run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
+                          address=address, max_retries=1,
+                          progress=_StatusEach(campaign, out, todo, progress))  # fmt: skip
+                _unpark(out, todo)  # the runs that finished drop their parked copies
     status = write_status(campaign, out)
     if stage == "train":
         return out / "status.json"
@@ -227,6 +233,20 @@ def run_campaign(
     path = campaign_table(campaign, out, out / FINISHED)
     write_status(campaign, out)
     return path
+
+
+def _left_to_others(out: Path, held: Sequence[str], names: Sequence[str]) -> None:
+    """Say which runs another process trains (`advgame.workflows.claims`); they are skipped."""
+    from advgame.workflows.claims import claim_path, describe, holder
+
+    for r in held:
+        claim = holder(out, r)
+        who = describe(claim) if claim is not None else "another process (it claimed it just now)"
+        log.warning(
+            "campaign: %s is training in %s; left to it. If that process is not this "
+            "campaign's, delete %s and run again.",
+            r, who, claim_path(out, r),
+        )  # fmt: skip
 
 
 def _unpark(out: Path, names: Sequence[str]) -> None:

@@ -51,7 +51,12 @@ def progress(run: Path) -> int:
 
 
 def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) -> dict[str, Any]:
-    """Write ``status.json``: each run's state and iteration, and the evaluation's."""
+    """Write ``status.json``: each run's state and iteration, and the evaluation's.
+
+    A run is ``training`` when it is in `training` or another live process claims it
+    (`advgame.workflows.claims`), as when the evaluate stage runs beside the train stage.
+    """
+    from advgame.workflows.claims import holder
     from advgame.workflows.park import PARKED, parked_iteration
 
     runs = {}
@@ -59,11 +64,8 @@ def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) ->
         it, of = progress(run_dir(out, r)), campaign.config(r).iterations
         if it < of:  # a run parked further on than runs/ holds resumes from there
             it = max(it, parked_iteration(out / PARKED / r))
-        state = (
-            "done"
-            if it >= of
-            else ("training" if r in training else "partial" if it else "pending")
-        )
+        busy = r in training or holder(out, r) is not None  # this process or another
+        state = "done" if it >= of else ("training" if busy else "partial" if it else "pending")
         runs[r] = {"state": state, "iteration": it, "of": of}
     table = out / "campaign.md"
     status = {
