@@ -240,8 +240,16 @@ def test_a_config_json_round_trip_gives_the_same_verdict(disruptors: Any) -> Non
         ({"disruptors": {"observation": None}}, ConfigError, ("'observation'", "None", "dict")),
         ({"max_episode_steps": -5}, ConfigError, ("max_episode_steps", "-5", ">= 1")),
         ({"bogus": 1}, UnknownNameError, ("'bogus'", "max_episode_steps", "render_mode")),
+        ({"render_mode": "rgb-array"}, ConfigError, ("render_mode", "'rgb-array'", "rgb_array")),
     ],
-    ids=["eps-string", "schedule-window", "options-none", "negative-steps", "unknown-keyword"],
+    ids=[
+        "eps-string",
+        "schedule-window",
+        "options-none",
+        "negative-steps",
+        "unknown-keyword",
+        "render-mode",
+    ],
 )
 def test_the_make_cases_of_issue_24_are_advgame_errors(
     kwargs: dict[str, Any], exc: type[AdvgameError], fragments: tuple[str, ...]

@@ -111,13 +111,15 @@ class ScenarioSpec:
         """
         _check_max_steps(kwargs.get("max_episode_steps"))
         try:
-            return load(self.task)(**{**self.task_kwargs, **kwargs})
+            task = load(self.task)(**{**self.task_kwargs, **kwargs})
         except AdvgameError:
             raise
         except Exception as exc:  # the simulator's own check of a keyword, in its own words
             if not kwargs:
                 raise
             raise _task_error(self, kwargs, exc) from exc
+        _check_render_mode(task, kwargs.get("render_mode"))
+        return task
 
     def task_keywords(self) -> list[str]:
         """The keyword arguments `make` may pass to this task base, where they can be known.
@@ -138,6 +140,21 @@ def _check_max_steps(steps: Any) -> None:
     raise ConfigError(
         f"max_episode_steps must be an integer >= 1 (or None for the task's own limit), got "
         f"{steps!r}; e.g. make(..., max_episode_steps=1000)."
+    )
+
+
+def _check_render_mode(task: Any, mode: Any) -> None:
+    """Refuse a render mode the built task does not list (Gymnasium only warns; rendering fails later)."""
+    if mode is None:
+        return
+    metadata = getattr(getattr(task, "env", None), "metadata", None)
+    modes = metadata.get("render_modes") if isinstance(metadata, Mapping) else None
+    if not isinstance(modes, (list, tuple)) or not modes or mode in modes:
+        return
+    task.close()
+    hint = did_you_mean(mode, [str(m) for m in modes]) if isinstance(mode, str) else ""
+    raise ConfigError(
+        f"render_mode must be one of {list(modes)} or None for this task, got {mode!r}.{hint}"
     )
 
 
