@@ -87,6 +87,9 @@ def test_a_second_train_stage_skips_the_run_another_one_trains(
     assert not (out / "runs" / "ppo-s0" / "state.json").exists()  # not touched here
     assert (out / "finished" / "ppo-s1").is_dir()  # the other run trained
     assert not claim_path(out, "ppo-s1").exists()
+    caplog.clear()
+    assert main(args) == 0  # again: the finished run is no one's, the claimed one still held
+    assert "ppo-s0 is training" in caplog.text and "ppo-s1" not in caplog.text
     status = write_status(load_campaign(spec), out)  # as the evaluate stage writes it
     assert {r: s["state"] for r, s in status["runs"].items()} == {
         "ppo-s0": "training",

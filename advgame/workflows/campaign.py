@@ -74,7 +74,7 @@ from advgame.workflows.campaign_status import (
     write_status,
 )
 from advgame.workflows.campaign_status import progress as _progress
-from advgame.workflows.claims import claimed
+from advgame.workflows.claims import claim_path, claimed
 
 __all__ = [
     "FINISHED",
@@ -205,12 +205,15 @@ def run_campaign(
             raise ConfigError(
                 f"No run {unknown[0]!r} in the campaign; its runs: {', '.join(campaign.runs())}."
             )
-        with claimed(out, [r for r in names if not (out / FINISHED / r).exists()]) as mine:
-            _left_to_others(out, [r for r in names if r not in mine], names)
-            names = [r for r in names if r in mine or (out / FINISHED / r).exists()]
+        unfinished = [r for r in names if not (out / FINISHED / r).exists()]
+        with claimed(out, unfinished) as mine:
+            _left_to_others(out, [r for r in unfinished if r not in mine])
+            names = [r for r in names if r in mine or r not in unfinished]
             _unpark(out, names)
             todo = [r for r in names if _progress(run_dir(out, r)) < campaign.config(r).iterations]
             todo = todo[:max_runs] if max_runs is not None else todo
+            for r in set(mine) - set(todo):  # not trained here now: free for another process
+                claim_path(out, r).unlink(missing_ok=True)
             write_status(campaign, out, training=todo)
             if todo:
                 log.info("campaign: training %d run(s): %s", len(todo), todo)
@@ -235,9 +238,9 @@ def run_campaign(
     return path
 
 
-def _left_to_others(out: Path, held: Sequence[str], names: Sequence[str]) -> None:
+def _left_to_others(out: Path, held: Sequence[str]) -> None:
     """Say which runs another process trains (`advgame.workflows.claims`); they are skipped."""
-    from advgame.workflows.claims import claim_path, describe, holder
+    from advgame.workflows.claims import describe, holder
 
     for r in held:
         claim = holder(out, r)
