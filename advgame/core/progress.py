@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import IO, Any
 
-__all__ = ["WINDOW", "LineProgress", "Silent", "listening", "progress", "report"]
+__all__ = ["WINDOW", "LineProgress", "Silent", "count_before", "listening", "progress", "report"]
 
 WINDOW = 10
 """Lines over which `LineProgress` measures the rate behind its estimate of the time left."""
@@ -144,6 +144,15 @@ class LineProgress:
         print(f"[{stamp}] {self.line()}", file=stream, flush=True)
         self.last, self.written, self.pending = self.clock(), self.n, False
         self.marks.append((self.last, self.n))
+
+
+def count_before(bar: Any, n: int) -> None:
+    """Count `n` done before this process on any display `progress` gives.
+
+    A `LineProgress` keeps them out of its rate (`LineProgress.skip`); a tqdm bar or `Silent`
+    just counts them.
+    """
+    getattr(bar, "skip", bar.update)(n)
 
 
 def progress(

@@ -37,6 +37,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from advgame.core.progress import count_before
 from advgame.errors import AdvgameError, ConfigError
 from advgame.runner.parts import part_key, read_unit_part, unit_key
 from advgame.runner.units import (
@@ -202,11 +203,10 @@ class _Ticks:
         if self.progress is None:
             return
         hook = getattr(self.progress, "unit_done", None)
-        skip = getattr(self.progress, "skip", None)
         if hook is not None:
             hook(self.index[key], before)
-        elif before and skip is not None:  # `LineProgress`: not part of this run's rate
-            skip(1)
+        elif before:  # not part of this run's rate
+            count_before(self.progress, 1)
         else:
             self.progress.update()
 

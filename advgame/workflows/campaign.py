@@ -74,7 +74,7 @@ from advgame.workflows.campaign_status import (
     write_status,
 )
 from advgame.workflows.campaign_status import progress as _progress
-from advgame.workflows.claims import claim_path, claimed
+from advgame.workflows.claims import claim_path, claimed, release
 
 __all__ = [
     "FINISHED",
@@ -212,8 +212,7 @@ def run_campaign(
             _unpark(out, names)
             todo = [r for r in names if _progress(run_dir(out, r)) < campaign.config(r).iterations]
             todo = todo[:max_runs] if max_runs is not None else todo
-            for r in set(mine) - set(todo):  # not trained here now: free for another process
-                claim_path(out, r).unlink(missing_ok=True)
+            release(out, [r for r in mine if r not in todo])  # not trained here now: free them
             write_status(campaign, out, training=todo)
             if todo:
                 log.info("campaign: training %d run(s): %s", len(todo), todo)

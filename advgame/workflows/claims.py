@@ -22,7 +22,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["CLAIM_SUFFIX", "claim_path", "claimed", "describe", "holder"]
+__all__ = ["CLAIM_SUFFIX", "claim_path", "claimed", "describe", "holder", "release"]
 
 CLAIM_SUFFIX = ".claim.json"
 """The claim file of run ``RUN`` is ``runs/RUN`` + this."""
@@ -55,9 +55,7 @@ def holder(out: Path, run: str) -> dict[str, Any] | None:
     try:
         data = json.loads(path.read_text())
         pid, host = int(data["pid"]), str(data["host"])
-    except FileNotFoundError:
-        return None
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError):  # none, or not a claim
         return None
     if host == socket.gethostname() and not _alive(pid):
         return None
@@ -101,5 +99,10 @@ def claimed(out: Path, runs: Sequence[str]) -> Iterator[list[str]]:
                 mine.append(run)
         yield list(mine)
     finally:
-        for run in mine:
-            claim_path(Path(out), run).unlink(missing_ok=True)
+        release(Path(out), mine)
+
+
+def release(out: Path, runs: Sequence[str]) -> None:
+    """Remove this process's claims on `runs` (runs it does not train after all)."""
+    for run in runs:
+        claim_path(out, run).unlink(missing_ok=True)

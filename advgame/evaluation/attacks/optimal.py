@@ -351,9 +351,11 @@ class _CandidateProgress:
 
     def unit_done(self, index: int, before: bool) -> None:
         """Candidate `index` finished (`before`: read back from its part file)."""
+        from advgame.core.progress import count_before
+
         unit = self.units[index]
         if before:
-            self._skip(unit.steps)
+            count_before(self.bar, unit.steps)
             return
         self.trained += 1
         self.bar.set_postfix_str(
@@ -362,14 +364,10 @@ class _CandidateProgress:
         )
         rest = max(unit.steps - self.partial, 0)  # all of it from a pool worker (no reports)
         if self.partial and rest:  # resumed: the steps before its save are not this run's rate
-            self._skip(rest)
+            count_before(self.bar, rest)
             rest = 0
         self.bar.update(rest)  # writes the milestone's line
         self.partial = 0
-
-    def _skip(self, n: int) -> None:
-        """Count `n` steps done before this run (`LineProgress.skip`; a tqdm bar just counts)."""
-        getattr(self.bar, "skip", self.bar.update)(n)
 
 
 def write_exploitability(out: Path, table: PayoffTable, threat: str, steps: int) -> None:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from advgame.core.policy import WhiteBox, WhiteBoxForwarder
+from advgame.core.progress import count_before
 from advgame.core.progress import progress as progress_display
 from advgame.errors import ConfigError
 from advgame.evaluation.table.applicable import Rows, learn_ahead, not_applicable
@@ -217,7 +218,7 @@ def evaluate(
     if kept:
         log.info("%d of %d jobs read back from %s", kept, len(jobs), parts)
     what = f"evaluate ({kept} of {len(jobs)} cells read back)" if kept else "evaluate"
-    before = sum(len(j.seeds) * j.episodes for j, r in zip(jobs, stored, strict=True) if r)
+    before = sum(len(r.value) for r in stored if r is not None)  # a row per episode
     shown = _EpisodeProgress(
         layout, what, progress, before, milestones=len(layout.units) < len(todo)
     )
@@ -258,8 +259,8 @@ class _EpisodeProgress:
 
     def unit_done(self, index: int, before: bool) -> None:
         """Unit `index` finished (`before`: read back from its part file)."""
-        if before:  # not this run's rate (`LineProgress.skip`; a tqdm bar just counts)
-            getattr(self.bar, "skip", self.bar.update)(self.sizes[index])
+        if before:  # not this run's rate
+            count_before(self.bar, self.sizes[index])
             return
         self.played += 1
         if self.milestones:

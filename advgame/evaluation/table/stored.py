@@ -103,6 +103,13 @@ class JobParts:
                 self._waiting[i] = self._waiting.get(i, 0) + 1
         self._chunks: dict[int, dict[int, list[dict[str, Any]]]] = {}
         self._records: dict[int, UnitRecord] = {}
+        self._keys: dict[int, str] = {}
+
+    def _key(self, i: int) -> str:
+        """Job `i`'s part key (a digest of the job: computed once)."""
+        if i not in self._keys:
+            self._keys[i] = part_key(self.jobs[i], self.parts)
+        return self._keys[i]
 
     def add(self, unit: int, rec: UnitRecord) -> None:
         """Unit number `unit` of the layout finished with `rec` (a unit given again is ignored)."""
@@ -128,13 +135,13 @@ class JobParts:
         self.rows[i] = [row for u in sorted(chunks) for row in chunks[u]]
         if self.parts is None:
             return
-        key = part_key(self.jobs[i], self.parts)
+        key = self._key(i)
         sources = [self._records[u] for u in sorted(chunks)]
         if [r.key for r in sources] != [key]:  # not a unit that is its whole job
             write_part(self.parts, _job_record(key, self.rows[i], sources[-1]))
         for u in chunks:
             owned = self.layout.owners[u]
-            mine = {part_key(self.jobs[j], self.parts) for j, _ in owned}
+            mine = {self._key(j) for j, _ in owned}
             if all(j in self.rows for j, _ in owned) and self._records[u].key not in mine:
                 (self.parts / f"{self._records[u].key}.pkl").unlink(missing_ok=True)
 
