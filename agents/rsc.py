@@ -39,11 +39,12 @@ from torch.nn import functional as F
 
 from advgame.agents.rsc_model import CausalWorldModel, perturb_states
 
-__all__ = ["MODE_ERROR_EVERY", "RSC", "one_step_samples"]
+__all__ = ["MODE_ERROR_EVERY", "RSC", "graph_logs", "one_step_samples"]
 
 MODE_ERROR_EVERY = 100
 """World-model updates between two measurements of its error under the most probable graph
-(``train/model_error_mode``: the graph the augmented rows are generated under)."""
+(``train/model_error_mode``: the graph the augmented rows are generated under) and of that
+graph (`graph_logs`)."""
 
 
 def one_step_samples(buffer: ReplayBuffer, count: int, env: Any = None) -> ReplayBufferSamples:
@@ -52,6 +53,28 @@ def one_step_samples(buffer: ReplayBuffer, count: int, env: Any = None) -> Repla
     # SB3's buffers draw from the global generator SB3 seeds; so does RSC
     idx = np.random.randint(0, upper, size=count)  # noqa: NPY002
     return ReplayBuffer._get_samples(buffer, idx, env=env)
+
+
+def graph_logs(model: CausalWorldModel, errors: th.Tensor) -> list[tuple[str, float]]:
+    """What the run's ``learning.csv`` records of the world model, as ``(name, value)``.
+
+    ``model_error_mode``: the mean of `errors` (each output's standardised squared error under
+    the most probable graph, the one augmentation uses); per output ``o`` (``s0``, ``s1``, ...,
+    ``r``): ``model_error_mode/o``, ``graph_parents/o`` (the graph's inputs of that output with
+    probability > 0.5, its own past included) and, for a state output, ``graph_self/o`` (the
+    probability of its own ``s[i] → s'[i]`` edge: 1 when `keep_self_edges`). The whole graph's logits are in every checkpoint
+    (``world_model.graph_logits``).
+    """
+    parents = model.mode_graph().sum(dim=1)
+    probs = model.edge_probabilities().detach()
+    rows: list[tuple[str, float]] = [("model_error_mode", float(errors.mean()))]
+    for o in range(model.obs_dim + 1):
+        name = f"s{o}" if o < model.obs_dim else "r"
+        rows += [(f"model_error_mode/{name}", float(errors[o])),
+                 (f"graph_parents/{name}", float(parents[o]))]  # fmt: skip
+        if o < model.obs_dim:
+            rows.append((f"graph_self/{name}", float(probs[o, o])))
+    return rows
 
 
 class RSC(SAC):
@@ -69,6 +92,10 @@ class RSC(SAC):
         sparsity: λ, the weight of the graph's expected number of edges.
         temperature: τ of the Gumbel-Softmax draws of the graph.
         model_warmup: world-model updates before the first augmented row.
+        graph_draws: how the world model's loss draws its graphs, ``"hard"`` (Bernoulli
+            draws, score-function gradient) or ``"relaxed"`` (Gumbel-Softmax draws).
+        keep_self_edges: every state output keeps its own past, ``s[i] → s'[i]``, as an edge
+            that is always present (not drawn, not in the sparsity term).
     """
 
     def __init__(
@@ -83,10 +110,12 @@ class RSC(SAC):
         vae_sigma: float = 1.0,
         model_hidden: int = 64,
         model_lr: float = 1e-3,
-        graph_lr: float = 1e-2,
-        sparsity: float = 0.01,
+        graph_lr: float = 3e-2,
+        sparsity: float = 3e-3,
         temperature: float = 1.0,
         model_warmup: int = 1000,
+        graph_draws: str = "hard",
+        keep_self_edges: bool = True,
         _init_setup_model: bool = True,
         **kwargs: Any,
     ) -> None:
@@ -96,6 +125,7 @@ class RSC(SAC):
         self.sigma, self.bound, self.vae_sigma = sigma, bound, vae_sigma
         self.model_hidden, self.model_lr, self.graph_lr = model_hidden, model_lr, graph_lr
         self.sparsity, self.temperature, self.model_warmup = sparsity, temperature, model_warmup
+        self.graph_draws, self.keep_self_edges = graph_draws, keep_self_edges
         self.counts = {"model": 0, "critic": 0, "actor": 0, "real_rows": 0, "augmented_rows": 0}
         """Updates (by network) and SAC batch rows (real, augmented) so far."""
         super().__init__(policy, env, _init_setup_model=False, **kwargs)
@@ -112,6 +142,7 @@ class RSC(SAC):
         self.world_model = CausalWorldModel(
             obs, act, hidden=self.model_hidden, lr=self.model_lr, graph_lr=self.graph_lr,
             sparsity=self.sparsity, temperature=self.temperature, sigma=self.vae_sigma,
+            graph_draws=self.graph_draws, keep_self_edges=self.keep_self_edges,
         )  # fmt: skip
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -134,15 +165,17 @@ class RSC(SAC):
     ) -> float:
         """One world-model update on `batch_size` one-step replay transitions; returns its loss.
 
-        Every `MODE_ERROR_EVERY` updates the same batch also measures the error under the most
-        probable graph, into ``logs["model_error_mode"]`` (no extra draw from the replay).
+        Every `MODE_ERROR_EVERY` updates the same batch also measures, into `logs`, the error
+        under the most probable graph (no extra draw from the replay) and that graph:
+        `graph_logs`.
         """
         data = one_step_samples(self.replay_buffer, batch_size, self._vec_normalize_env)  # type: ignore[arg-type]
         batch = (data.observations, data.actions, data.next_observations, data.rewards)
         loss = self.world_model.update(*batch)
         self.counts["model"] += 1
         if logs is not None and self.counts["model"] % MODE_ERROR_EVERY == 0:
-            logs["model_error_mode"].append(self.world_model.mode_error(*batch))
+            for name, value in graph_logs(self.world_model, self.world_model.mode_errors(*batch)):
+                logs[name].append(value)
         return loss
 
     def augment(self, data: ReplayBufferSamples, rows: int) -> ReplayBufferSamples:

@@ -56,14 +56,24 @@ class RSCConfig(_OffPolicyConfig):
     """Width of the world model's per-output hidden layers (ours)."""
     model_lr: float = 1e-3
     """The world model networks' Adam step size (ours)."""
-    graph_lr: float = 1e-2
+    graph_lr: float = 3e-2
     """The causal graph logits' Adam step size (ours)."""
-    sparsity: float = 0.01
+    sparsity: float = 3e-3
     """λ: weight of the graph's expected number of edges in the world-model loss (ours)."""
     temperature: float = 1.0
     """τ of the Gumbel-Softmax draws of the graph (ours)."""
     model_warmup: int = 1000
     """World-model updates before the first augmented transition (ours)."""
+    graph_draws: str = "hard"
+    """How the world model's loss draws each row's graph (ours): ``"hard"``, Bernoulli edges
+    with the score function's gradient, or ``"relaxed"``, Gumbel-Softmax draws, which let an
+    edge's logit die while the masked input still informs its output (docs/causal.md, "The
+    graph's draws"; the RS-LiftCausal runs before 6 Dec trained so)."""
+    keep_self_edges: bool = True
+    """Give every state output its own past, ``s[i] → s'[i]``, as an edge always present (ours:
+    a variable's persistence is never the spurious correlation RSC breaks; without it the graph
+    may predict a variable from a correlated stand-in, e.g. the cube's colour from its side,
+    and then an augmented colour does not stay the colour)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -97,5 +107,6 @@ class RSCConfig(_OffPolicyConfig):
             sigma=self.sigma, bound=self.bound, vae_sigma=self.vae_sigma,
             model_hidden=self.model_hidden, model_lr=self.model_lr, graph_lr=self.graph_lr,
             sparsity=self.sparsity, temperature=self.temperature, model_warmup=self.model_warmup,
+            graph_draws=self.graph_draws, keep_self_edges=self.keep_self_edges,
             **self._off_policy(seed, total_steps, tensorboard_log),
         )  # fmt: skip

@@ -6,11 +6,12 @@ had changed, and asks a world model that only uses *causal* parents what would f
 
 * `CausalWorldModel`: a structural causal model from ``(s, a)`` to ``(s', r)``. A learnable
   binary graph (one Bernoulli edge per input and output dimension, logits ``φ``) masks the
-  inputs of each output's own MLP; during training each row's graph is drawn with the binary
-  Gumbel-Softmax (relaxed samples in (0, 1) at temperature τ, so the gradient reaches ``φ``),
-  and prediction plus the sparsity penalty ``λ · Σ σ(φ)`` (the expected number of edges) train
-  ``φ`` with the networks. An edge the prediction does not need drifts to 0: a relaxed edge
-  only adds noise to an input the output can do without.
+  inputs of each output's own MLP; during training each row's graph is drawn edge by edge, and
+  the prediction loss (with the score function's gradient for ``φ``) plus the sparsity term
+  ``λ · Σ −log(1 − σ(φ))`` train ``φ`` with the networks: an edge stays while dropping it costs
+  the prediction more than ``λ``. Each state variable's own past, ``s[i] → s'[i]``, is an edge
+  that is always present (`losses` says why; ``graph_draws="relaxed"`` and
+  ``keep_self_edges=False`` give the Gumbel-Softmax reading the first runs trained with).
 * `perturb_states`: the paper's Eq. 7. For each perturbed row ``t`` one state dimension ``i``
   is drawn, and ``s_t[i]`` is replaced by ``s_k[i]`` of the row ``k`` of the batch that
   maximises ``(s_t[i] − s_k[i])² / Σ_{j≠i} (s_t[j] − s_k[j])²``: the row most different in
@@ -32,7 +33,10 @@ import torch as th
 from torch import nn
 from torch.nn import functional as F
 
-__all__ = ["CausalWorldModel", "RunningNorm", "perturb_states"]
+__all__ = ["GRAPH_DRAWS", "CausalWorldModel", "RunningNorm", "perturb_states"]
+
+GRAPH_DRAWS = ("hard", "relaxed")
+"""How the world model's loss draws each row's graph (`CausalWorldModel.losses`)."""
 
 
 class RunningNorm(nn.Module):
@@ -88,8 +92,14 @@ class CausalWorldModel(nn.Module):
         temperature: τ of the Gumbel-Softmax draws of the graph.
         sigma: the fixed standard deviation of the Gaussian likelihood (standardised units).
         init_logit: initial logit of every edge (2: each edge starts present with p ≈ 0.88).
+        graph_draws: ``"hard"`` (Bernoulli draws, score-function gradient) or ``"relaxed"``
+            (Gumbel-Softmax draws): see `losses`.
+        keep_self_edges: give every state output its own past, ``s[i] → s'[i]``, as an edge
+            that is always present, out of the sparsity term and the graph's draws.
 
     """
+
+    kept: th.Tensor
 
     def __init__(
         self,
@@ -97,16 +107,21 @@ class CausalWorldModel(nn.Module):
         act_dim: int,
         hidden: int = 64,
         lr: float = 1e-3,
-        graph_lr: float = 1e-2,
-        sparsity: float = 0.01,
+        graph_lr: float = 3e-2,
+        sparsity: float = 3e-3,
         temperature: float = 1.0,
         sigma: float = 1.0,
         init_logit: float = 2.0,
+        graph_draws: str = "hard",
+        keep_self_edges: bool = True,
     ) -> None:
         super().__init__()
         self.obs_dim, self.act_dim = obs_dim, act_dim
         n_in, n_out = obs_dim + act_dim, obs_dim + 1
         self.sparsity, self.temperature, self.sigma = sparsity, temperature, sigma
+        if graph_draws not in GRAPH_DRAWS:
+            raise ValueError(f"graph_draws must be one of {GRAPH_DRAWS}, got {graph_draws!r}.")
+        self.graph_draws, self.keep_self_edges = graph_draws, keep_self_edges
         self.graph_logits = nn.Parameter(th.full((n_out, n_in), float(init_logit)))
         """φ: row o, column j is the logit of the edge from input j to output o."""
         self.w1, self.b1 = (
@@ -119,6 +134,11 @@ class CausalWorldModel(nn.Module):
         )
         self.w3, self.b3 = _uniform(n_out, hidden, fan_in=hidden), _uniform(n_out, fan_in=hidden)
         self.inputs, self.targets = RunningNorm(n_in), RunningNorm(n_out)
+        kept = th.zeros(n_out, n_in)
+        if keep_self_edges:
+            kept[:obs_dim, :obs_dim].fill_diagonal_(1.0)
+        self.register_buffer("kept", kept, persistent=False)
+        """1 for each edge that is always present (``s[i] → s'[i]`` when kept), else 0."""
         weights = [self.w1, self.b1, self.w2, self.b2, self.w3, self.b3]
         self.optimizer = th.optim.Adam(
             [{"params": weights, "lr": lr}, {"params": [self.graph_logits], "lr": graph_lr}],
@@ -126,8 +146,8 @@ class CausalWorldModel(nn.Module):
         )
 
     def edge_probabilities(self) -> th.Tensor:
-        """``σ(φ)``: shape (obs_dim + 1, obs_dim + act_dim), outputs ``(s', r)`` by inputs ``(s, a)``."""
-        return th.sigmoid(self.graph_logits)
+        """``σ(φ)``, 1 on the kept edges: shape (obs_dim + 1, obs_dim + act_dim), outputs ``(s', r)`` by inputs ``(s, a)``."""
+        return th.maximum(th.sigmoid(self.graph_logits), self.kept)
 
     def sample_graph(self, rows: int) -> th.Tensor:
         """One relaxed graph per row (entries in (0, 1)) by the binary Gumbel-Softmax at τ.
@@ -144,12 +164,12 @@ class CausalWorldModel(nn.Module):
         return th.sigmoid((self.graph_logits + (th.log(u) - th.log1p(-u))) / self.temperature)
 
     def mode_graph(self) -> th.Tensor:
-        """The most probable graph: the edges with probability > 0.5."""
-        return (self.graph_logits > 0).float()
+        """The most probable graph: the edges with probability > 0.5 (the kept ones included)."""
+        return (self.edge_probabilities() > 0.5).float()
 
     def forward(self, inputs: th.Tensor, graph: th.Tensor) -> th.Tensor:
         """Standardised ``(s', r)`` from standardised ``(s, a)`` rows, output o seeing ``graph[o]``."""
-        masked = inputs.unsqueeze(1) * graph  # (rows, outputs, inputs)
+        masked = inputs.unsqueeze(1) * th.maximum(graph, self.kept)  # (rows, outputs, inputs)
         h = F.relu(th.einsum("boi,oih->boh", masked, self.w1) + self.b1)
         h = F.relu(th.einsum("boh,ohk->bok", h, self.w2) + self.b2)
         return th.einsum("boh,oh->bo", h, self.w3) + self.b3
@@ -157,12 +177,43 @@ class CausalWorldModel(nn.Module):
     def losses(
         self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor
     ) -> tuple[th.Tensor, th.Tensor]:
-        """The prediction loss under a drawn graph and the sparsity penalty, per batch."""
+        """The prediction loss under drawn graphs and the sparsity penalty, per batch.
+
+        ``graph_draws = "hard"`` (the default): each row's graph is drawn edge by edge, present
+        with probability ``σ(φ)``, so an output trains on exactly the inputs its graph gives it,
+        as it predicts for augmentation under the most probable graph. The logits' gradient is
+        the score function's, ``mean_rows (L − b) (m − σ(φ))`` per edge, with ``L`` the row's
+        loss of that output and ``b`` the mean of the batch's other rows (unbiased: it compares
+        the loss with and without each edge). The returned loss has the prediction loss's
+        value; the score term adds only its gradient.
+
+        ``"relaxed"``: binary Gumbel-Softmax draws, never exactly 0, and their reparameterised
+        gradient. An input masked by 0.005 still tells a network its sign, so under relaxed
+        draws an edge its output needs (a colour that stays the colour) lost its logit to the
+        sparsity term while the loss stayed low, and the most probable graph then cut it
+        (docs/causal.md, "The graph's draws").
+        """
         x = self.inputs.normalize(th.cat([obs, actions], dim=1).float())
         y = self.targets.normalize(th.cat([next_obs, rewards.reshape(-1, 1)], dim=1).float())
-        pred = self(x, self.sample_graph(len(x)))
-        nll = ((pred - y) ** 2).sum(dim=1).mean() / (2 * self.sigma**2)
-        return nll, self.sparsity * self.edge_probabilities().sum()
+        learned = 1 - self.kept
+        if self.graph_draws == "relaxed":
+            penalty = self.sparsity * (self.edge_probabilities() * learned).sum()
+        else:  # −log P(edge absent): its gradient σ(φ) does not vanish on a confident edge
+            penalty = self.sparsity * (F.softplus(self.graph_logits) * learned).sum()
+        if self.graph_draws == "relaxed":
+            pred = self(x, self.sample_graph(len(x)))
+            return ((pred - y) ** 2).sum(dim=1).mean() / (2 * self.sigma**2), penalty
+        rows = len(x)
+        with th.no_grad():
+            graph = th.bernoulli(self.edge_probabilities().expand(rows, -1, -1))
+        per_row = ((self(x, graph) - y) ** 2) / (2 * self.sigma**2)  # (rows, outputs)
+        with th.no_grad():  # leave-one-out baseline: L − mean of the other rows
+            advantage = (per_row - per_row.mean(dim=0)) * rows / max(rows - 1, 1)
+        log_p = graph * F.logsigmoid(self.graph_logits) + (1 - graph) * F.logsigmoid(
+            -self.graph_logits
+        )
+        score = (advantage.unsqueeze(2) * log_p * learned).mean(dim=0).sum()
+        return per_row.sum(dim=1).mean() + score - score.detach(), penalty
 
     def update(
         self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor
@@ -178,17 +229,24 @@ class CausalWorldModel(nn.Module):
         return float(loss.item())
 
     @th.no_grad()
-    def mode_error(
+    def mode_errors(
         self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor
-    ) -> float:
-        """Mean squared error per output, standardised, under the most probable graph.
+    ) -> th.Tensor:
+        """Each output's mean squared error, standardised, under the most probable graph.
 
         What the augmented rows are generated under (`predict`); the training loss draws a
-        graph per row instead, so the two can differ (logged as ``train/model_error_mode``).
+        graph per row instead, so the two can differ. Shape (obs_dim + 1,): ``s'`` then ``r``;
+        an output predicted no better than its mean scores about 1.
         """
         x = self.inputs.normalize(th.cat([obs, actions], dim=1).float())
         y = self.targets.normalize(th.cat([next_obs, rewards.reshape(-1, 1)], dim=1).float())
-        return float(((self(x, self.mode_graph()) - y) ** 2).mean())
+        return ((self(x, self.mode_graph()) - y) ** 2).mean(dim=0)
+
+    def mode_error(
+        self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor
+    ) -> float:
+        """The mean of `mode_errors` over the outputs (``train/model_error_mode``)."""
+        return float(self.mode_errors(obs, actions, next_obs, rewards).mean())
 
     @th.no_grad()
     def predict(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, th.Tensor]:

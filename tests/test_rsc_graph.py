@@ -1,0 +1,186 @@
+"""RSC's causal graph on systems whose true graph is known, and on the real RS-LiftCausal task.
+
+`ColourPoint` has a point ``x`` moved by the action, a side ``s`` (continuous, fixed for the
+episode) and a colour ``c = sign(s)`` that goes with the side in every transition, as the cube's
+colour goes with its side in RS-LiftCausal's training correlation. The true graph: ``x' ← x, a``;
+``s' ← s``; ``c' ← c`` (an identity edge: the colour stays the colour); ``r ← x, s``. The side
+predicts the next colour as well as the colour itself does, so only the graph's treatment of a
+variable's own past keeps ``c → c'``; and ``r = −(x − s)²`` needs the side's magnitude, so the
+colour is no stand-in for it.
+
+Every check can fail: a graph that drops ``c → c'`` (the bug of the RS-LiftCausal runs before
+6 Dec, whose next colours were one fixed colour the data never shows) predicts one colour for
+every row; one that keeps ``s → c'`` follows the side when the perturbation moves the colour.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from advgame.agents.rsc import one_step_samples
+from advgame.agents.rsc_config import RSCConfig
+from advgame.agents.rsc_model import CausalWorldModel, perturb_states
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+X, S, C, A = 0, 1, 2, 3  # inputs: x, side, colour, action
+NEXT_X, NEXT_S, NEXT_C, REWARD = 0, 1, 2, 3  # outputs: x', s', c', r
+
+
+class ColourPoint(gym.Env):
+    """A point ``x`` beside a side ``s`` in ±[0.5, 1] and its colour ``c = sign(s)``."""
+
+    observation_space = spaces.Box(-2.0, 2.0, (3,), np.float32)
+    action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def __init__(self) -> None:
+        self.x, self.side, self.t = 0.0, 1.0, 0
+
+    def _obs(self) -> np.ndarray:
+        return np.array([self.x, self.side, np.sign(self.side)], dtype=np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        sign = 1.0 if self.np_random.random() < 0.5 else -1.0
+        self.x, self.side, self.t = float(self.np_random.uniform(-1, 1)), 0.0, 0
+        self.side = sign * float(self.np_random.uniform(0.5, 1.0))
+        return self._obs(), {}
+
+    def step(self, action):
+        reward = -((self.x - self.side) ** 2)
+        self.x = float(np.clip(self.x + 0.3 * float(np.asarray(action).ravel()[0]), -1, 1))
+        self.t += 1
+        return self._obs(), reward, False, self.t >= 25, {}
+
+
+@pytest.fixture(scope="module")
+def trained():
+    """An RSC whose world model trained 2,000 updates on 2,000 random ColourPoint transitions."""
+    th.set_num_threads(1)
+    options = {"net_arch": (16, 16), "batch_size": 128, "learning_starts": 2000}
+    model = RSCConfig(**options).make_model(DummyVecEnv([ColourPoint]), seed=0, total_steps=2000)
+    model.learn(2000)
+    for _ in range(2000):
+        model.update_world_model(128)
+    return model
+
+
+def test_the_graph_is_the_true_one_identity_edge_included(trained) -> None:
+    edges = trained.world_model.edge_probabilities().detach()
+    for output, parents in {NEXT_X: (X, A), NEXT_S: (S,), NEXT_C: (C,), REWARD: (X, S)}.items():
+        for i in range(4):
+            if i in parents:
+                assert float(edges[output, i]) > 0.9, (output, i, edges[output])
+            else:
+                assert float(edges[output, i]) < 0.2, (output, i, edges[output])
+
+
+def test_every_output_is_predicted_under_the_graph_augmentation_uses(trained) -> None:
+    th.manual_seed(3)
+    pool = one_step_samples(trained.replay_buffer, 1024)
+    errors = trained.world_model.mode_errors(
+        pool.observations, pool.actions, pool.next_observations, pool.rewards
+    )
+    assert float(errors.max()) < 0.05, errors  # standardised: 1 is no better than the mean
+
+
+def test_augmented_next_states_stay_in_the_datas_support(trained) -> None:
+    th.manual_seed(4)
+    pool = one_step_samples(trained.replay_buffer, 1024)
+    aug = trained.augment(pool, 1024)
+    colour = aug.observations[:, C]
+    # the perturbation moved some colours away from their side: the next colour follows the
+    # colour (its one parent), not the side, and is one the data has (±1)
+    moved = th.sign(colour) != th.sign(aug.observations[:, S])
+    assert int(moved.sum()) > 50
+    next_colour = aug.next_observations[:, NEXT_C]
+    assert float((next_colour - th.sign(colour)).abs().max()) < 0.1
+    side = aug.observations[:, S]
+    assert float((aug.next_observations[:, NEXT_S] - side).abs().max()) < 0.1
+
+
+def test_self_edges_are_kept_unless_asked_and_the_draws_are_checked() -> None:
+    model = CausalWorldModel(3, 1)
+    model.graph_logits.data.fill_(-20.0)  # every learned edge absent
+    assert model.mode_graph()[:3, :3].equal(th.eye(3)) and model.mode_graph()[3].sum() == 0
+    old = CausalWorldModel(3, 1, graph_draws="relaxed", keep_self_edges=False)
+    old.graph_logits.data.fill_(-20.0)
+    assert old.mode_graph().sum() == 0
+    with pytest.raises(ValueError, match="graph_draws"):
+        CausalWorldModel(3, 1, graph_draws="soft")
+
+
+def test_hard_draws_give_the_score_functions_gradient() -> None:
+    """The logits' gradient is ``mean (L − b)(m − σ(φ))``, recomputed here from the same draws."""
+    th.manual_seed(0)
+    model = CausalWorldModel(2, 1, hidden=8)
+    obs, actions = th.randn(64, 2), th.randn(64, 1)
+    next_obs, rewards = obs + 0.1 * actions, obs[:, 0] ** 2
+    state = th.random.get_rng_state()
+    nll, _ = model.losses(obs, actions, next_obs, rewards)
+    nll.backward()
+    got = model.graph_logits.grad.clone()
+    th.random.set_rng_state(state)  # the same edge draws again
+    graph = th.bernoulli(model.edge_probabilities().detach().expand(64, -1, -1))
+    x = model.inputs.normalize(th.cat([obs, actions], dim=1))
+    y = model.targets.normalize(th.cat([next_obs, rewards.reshape(-1, 1)], dim=1))
+    with th.no_grad():
+        loss = (model(x, graph) - y) ** 2 / 2
+    baseline = (loss.sum(dim=0, keepdim=True) - loss) / 63
+    p = model.edge_probabilities().detach()
+    want = ((loss - baseline).unsqueeze(2) * (graph - p)).mean(dim=0) * (1 - model.kept)
+    # the prediction loss also reaches φ through nothing else: the draws are not differentiable
+    assert th.allclose(got, want, atol=1e-6), (got, want)
+    assert float(nll.detach()) == pytest.approx(float(loss.sum(dim=1).mean()), rel=1e-5)
+
+
+def _lift_transitions(episodes: int = 4, steps: int = 100) -> tuple[th.Tensor, ...]:
+    """Random-action RS-LiftCausal transitions under the training correlation (its preset's
+    own workspace adversary sets the cube's side and colour at each reset)."""
+    import advgame
+    from advgame.core.views import SingleAgentView
+
+    game = advgame.make("RS-LiftCausal", preset="spurious-xnr", max_episode_steps=steps)
+    env = SingleAgentView(game, "protagonist", dict(game.preset.adversaries))
+    env.action_space.seed(0)
+    rows: list[tuple[np.ndarray, ...]] = []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=episode)
+        done = False
+        while not done:
+            action = env.action_space.sample()
+            nxt, reward, terminated, truncated, _ = env.step(action)
+            rows.append((obs, action, nxt, np.float32(reward)))
+            obs, done = nxt, terminated or truncated
+    env.close()
+    return tuple(
+        th.as_tensor(np.array(column), dtype=th.float32) for column in zip(*rows, strict=True)
+    )
+
+
+def test_on_rs_liftcausal_the_colour_stays_the_colour_in_augmented_rows() -> None:
+    """The released RSC agents' failure, on the real task: after training, every augmented next
+    state's colour is the augmented state's own (each channel 0 or 1, as in the data), not one
+    fixed colour and not the one the cube's side would give."""
+    th.manual_seed(0)
+    obs, actions, next_obs, rewards = _lift_transitions()
+    colour = slice(obs.shape[1] - 3, obs.shape[1])  # object-state's last three: the cube's RGB
+    assert set(obs[:, colour].unique().tolist()) == {0.0, 1.0}  # red and green both seen
+    model = CausalWorldModel(obs.shape[1], actions.shape[1], hidden=16)
+    generator = np.random.default_rng(0)
+    for _ in range(1000):
+        rows = th.as_tensor(generator.integers(0, len(obs), 128))
+        model.update(obs[rows], actions[rows], next_obs[rows], rewards[rows])
+    edges = model.edge_probabilities().detach()
+    for channel in range(colour.start, colour.stop - 1):  # R and G (B is 0 throughout)
+        assert float(edges[channel, channel]) > 0.9, edges[channel, channel]
+    states, _ = perturb_states(obs, len(obs))
+    predicted, _ = model.predict(states, actions)
+    shown = states[:, colour].round()
+    assert float((predicted[:, colour] - shown).abs().max()) < 0.1
+    recoloured = (shown != obs[:, colour]).any(dim=1)
+    assert int(recoloured.sum()) > 0  # Eq. 7 moved some colours, and they stayed moved
