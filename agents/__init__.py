@@ -6,14 +6,14 @@ if __name__ != "advgame.agents":  # pragma: no cover - packaging guard
         "(pip install -e . from the repository root), not as the bare `agents`."
     )
 
-from advgame.agents.dbc_config import DBCConfig
+from advgame.agents.dbc.config import DBCConfig
 from advgame.agents.learners import LEARNERS
-from advgame.agents.marl import MARL_LEARNERS, IPPOConfig, MAPPOConfig, TeamLearner
-from advgame.agents.ompo_config import OMPOConfig
-from advgame.agents.recurrent import RecurrentPPOConfig
-from advgame.agents.rsc_config import RSCConfig
-from advgame.agents.sa_recurrent_config import SARecurrentPPOConfig
-from advgame.agents.sb3 import PPOConfig, SACConfig, SAPPOConfig, TD3Config
+from advgame.agents.marl.marl import MARL_LEARNERS, IPPOConfig, MAPPOConfig, TeamLearner
+from advgame.agents.ompo.config import OMPOConfig
+from advgame.agents.recurrent.config import RecurrentPPOConfig
+from advgame.agents.rsc.config import RSCConfig
+from advgame.agents.sa.config import SARecurrentPPOConfig
+from advgame.agents.sb3.config import PPOConfig, SACConfig, SAPPOConfig, TD3Config
 
 __all__ = [
     "LEARNERS",

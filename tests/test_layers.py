@@ -237,7 +237,7 @@ def test_committed_part_files_load() -> None:
 
 
 def test_stable_pickle_writes_old_names_and_matches_the_c_pickler() -> None:
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
     from advgame.core.game import Game
     from advgame.evaluation.table.jobs import AdversarySetup
 
@@ -264,7 +264,7 @@ def test_a_committed_campaign_finds_its_part_files_by_the_keys_of_its_units(
     """The Hopper campaign's optimal-attack units, built now, are named as before the move.
 
     Their pickles spell `BestResponseJob` and `SB3Checkpoint`, whose modules moved
-    (`advgame.training.checkpoint` -> `advgame.agents.checkpoint`): the keys must not.
+    (`advgame.training.checkpoint` -> `advgame.agents.common.checkpoint`): the keys must not.
     """
     from advgame.core.registry import make
     from advgame.evaluation.attacks.optimal import OPTIMAL_GRID

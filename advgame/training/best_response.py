@@ -1,7 +1,7 @@
 """Best-response training as a job: one learner against a fixed mixture of opponents.
 
 A `BestResponseJob` is a pure, picklable value; `train_best_response` trains its learner
-(`advgame.agents.side.Side`, an SB3 model on a `SingleAgentView`) against a
+(`advgame.agents.common.side.Side`, an SB3 model on a `SingleAgentView`) against a
 `MixtureSpec` of the other side's policies and returns the checkpoint *as bytes*, so the job
 can run on any worker of any node (`advgame.runner.run.run_units`) and the driver
 writes the files where the run keeps them. `advgame.workflows.psro` builds these jobs.
@@ -145,7 +145,7 @@ def _normalized_targets(job: BestResponseJob) -> list[str]:
 
 def _opponent_std(job: BestResponseJob) -> np.ndarray | None:
     """The std of the most likely opponent checkpoint's normalizer (None without one)."""
-    from advgame.agents.checkpoint import load_normalizer
+    from advgame.agents.common.checkpoint import load_normalizer
 
     for mix in job.opponents.values():
         spec = mix.specs[int(np.argmax(mix.weights))]
@@ -176,7 +176,7 @@ def best_response_side(
     """
     import torch
 
-    from advgame.agents.side import Side
+    from advgame.agents.common.side import Side
     from advgame.core.views import view_factory
     from advgame.training.config import learner_config
 

@@ -329,7 +329,7 @@ class _PSRO:
 
     def _add_member(self, job: BestResponseJob, result: dict[str, Any], it: int) -> None:
         """Write a best response's files under ``checkpoints/<id>/``; add it as a member."""
-        from advgame.agents.checkpoint import SB3Checkpoint
+        from advgame.agents.common.checkpoint import SB3Checkpoint
 
         folder = self.dir / "checkpoints" / job.name.replace("@", "_")
         folder.mkdir(parents=True, exist_ok=True)

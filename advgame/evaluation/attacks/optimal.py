@@ -273,7 +273,7 @@ def _search(
     progress: bool = False,
 ) -> dict[str, _Found]:
     """Train every candidate as executor jobs, write their files, keep each row's strongest."""
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
     from advgame.core.progress import listening
     from advgame.evaluation.table.running import _DEFAULT_EXECUTOR, evaluate
     from advgame.runner.run import run_units
