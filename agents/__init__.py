@@ -21,8 +21,8 @@ from advgame.agents.marl.marl import MARL_LEARNERS, IPPOConfig, MAPPOConfig, Tea
 from advgame.agents.ompo.config import OMPOConfig
 from advgame.agents.recurrent.config import RecurrentPPOConfig
 from advgame.agents.rsc.config import RSCConfig
-from advgame.agents.sa.config import SARecurrentPPOConfig
-from advgame.agents.sb3.config import PPOConfig, SACConfig, SAPPOConfig, TD3Config
+from advgame.agents.sa.config import SAPPOConfig, SARecurrentPPOConfig
+from advgame.agents.sb3.config import PPOConfig, SACConfig, TD3Config
 
 __all__ = [
     "LEARNERS",

@@ -149,6 +149,54 @@ def test_no_circle_between_folders() -> None:
     assert not _cycles(folders), _cycles(folders)
 
 
+AGENT_ROOMS = [
+    ("common",),  # what every family shares: replay, normalizers, checkpoints, statistics
+    ("sb3",),  # SB3's own PPO/SAC/TD3: the configs the SB3-based families extend
+    ("sa", "recurrent", "marl", "safe", "ompo", "rsc", "dbc"),  # one room per learner family
+    ("learners", ""),  # the registry of single-agent configs, and the package's face
+]
+"""Rooms of `advgame.agents`, bottom to top (a room is ``advgame.agents.<room>``)."""
+FAMILIES = AGENT_ROOMS[2]
+
+FAMILY_EDGES = {
+    ("sa", "recurrent"): "SA-PPO's recurrent form is the unrolled LSTM PPO plus the regulariser: "
+    "SARecurrentPPO extends UnrolledRecurrentPPO, its config RecurrentPPOConfig",
+    ("safe", "marl"): "the constrained learners are team PPO with a cost critic: they reuse "
+    "MAPPO's networks, collector and update (TeamLearner, TeamPPOConfig)",
+}
+"""The only imports from one family into another, each with its reason."""
+
+
+def _room(module: str) -> str:
+    return module.split(".")[2] if module.count(".") >= 2 else ""
+
+
+def test_agents_rooms_import_down_and_families_not_each_other() -> None:
+    rank = {room: k for k, rooms in enumerate(AGENT_ROOMS) for room in rooms}
+    agents = {m for m in MODULES if m.startswith("advgame.agents")}
+    assert not {_room(m) for m in agents} - set(rank), "a room of agents/ is in no AGENT_ROOMS"
+    bad, used = [], set()
+    for a in sorted(agents):
+        for b in sorted(GRAPH[a] & agents):
+            ra, rb = _room(a), _room(b)
+            if ra == rb or rank[rb] < rank[ra] or (rank[rb] == rank[ra] and ra not in FAMILIES):
+                continue
+            if (ra, rb) in FAMILY_EDGES:
+                used.add((ra, rb))
+                continue
+            bad.append(f"{a} -> {b}")
+    assert not bad, "agents/ rooms importing sideways or up (move the shared part down):\n" + (
+        "\n".join(bad)
+    )
+    assert used == set(FAMILY_EDGES), f"allowed edges no longer used: {set(FAMILY_EDGES) - used}"
+
+
+def test_agents_has_no_flat_file_of_a_family() -> None:
+    flat = sorted(m for m in MODULES if m.startswith("advgame.agents.") and m.count(".") == 2
+                  and MODULES[m].name != "__init__.py")  # fmt: skip
+    assert flat == ["advgame.agents.learners"], f"put each in its family's room: {flat}"
+
+
 def test_every_file_is_under_the_limit() -> None:
     files = list(MODULES.values())
     long = {

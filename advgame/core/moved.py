@@ -99,7 +99,10 @@ MOVED: dict[str, str] = {
 }
 """Old module name -> the module that holds its classes and functions now."""
 
-MOVED_NAMES: dict[tuple[str, str], tuple[str, str]] = {}
+MOVED_NAMES: dict[tuple[str, str], tuple[str, str]] = {
+    # 6 Dec 2026 (issue 71): SA-PPO's config joined its family (agents/sb3 is below agents/sa)
+    ("advgame.agents.sb3", "SAPPOConfig"): ("advgame.agents.sa.config", "SAPPOConfig"),
+}
 """Single classes moved out of a module that stayed: (module, name) -> (module, name)."""
 
 _FORMER = {new: old for old, new in MOVED.items()}

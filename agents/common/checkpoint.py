@@ -20,6 +20,7 @@ from advgame.agents.common.recurrent_policy import RecurrentSB3Policy
 from advgame.agents.common.sb3_policy import SB3Policy
 from advgame.core.files import reading
 from advgame.core.policy import AgentInfo
+from advgame.core.registry import load
 from advgame.errors import ConfigError
 
 __all__ = [
@@ -33,6 +34,8 @@ __all__ = [
     "saved_recurrent",
 ]
 
+_LEARNERS = "advgame.agents.learners:LEARNERS"
+
 ALGOS = ("ppo", "sac", "td3", "ompo", "dbc", "rsc", "recurrent-ppo")
 
 
@@ -41,16 +44,15 @@ def _algo_class(algo: str) -> Any:
 
     SB3's own for PPO, SAC and TD3; otherwise the class its learner config trains
     (``model_class``: OMPO, DBC, RSC, sb3-contrib's RecurrentPPO), so a new learner registers
-    in one place.
+    in one place. The registry of configs sits above the common room (it names every family):
+    it is looked up by its entry point, as `advgame.training.TrainConfig` does.
     """
     import stable_baselines3 as sb3
-
-    from advgame.agents.learners import LEARNERS
 
     if algo not in ALGOS:
         raise ConfigError(f"Unknown algorithm {algo!r}; expected one of {ALGOS}.")
     classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}
-    return classes[algo] if algo in classes else LEARNERS[algo].model_class()
+    return classes[algo] if algo in classes else load(_LEARNERS)[algo].model_class()
 
 
 @functools.lru_cache(maxsize=64)
