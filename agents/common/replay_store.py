@@ -31,7 +31,7 @@ import numpy as np
 
 from advgame.errors import FileFormatError
 
-__all__ = ["FORMAT", "load_buffer", "row_arrays", "store_buffer"]
+__all__ = ["FORMAT", "filled", "load_buffer", "row_arrays", "store_buffer"]
 
 FORMAT = 1
 """Version of the manifest layout."""
@@ -64,7 +64,8 @@ def _put(buffer: Any, name: str, array: np.ndarray) -> None:
         setattr(buffer, name, array)
 
 
-def _filled(buffer: Any) -> int:
+def filled(buffer: Any) -> int:
+    """How many rows of an SB3 replay buffer hold transitions (per env): all once it wrapped."""
     return int(buffer.buffer_size) if buffer.full else int(buffer.pos)
 
 
@@ -130,21 +131,21 @@ def store_buffer(buffer: Any, folder: Path, previous: dict[str, Any] | None = No
     """
     folder.mkdir(parents=True, exist_ok=True)
     arrays = row_arrays(buffer)
-    filled = _filled(buffer)
+    used = filled(buffer)
     chunks: list[dict[str, Any]] = []
     if previous and not buffer.full:
         for chunk in previous.get("chunks", []):
             start, end = int(chunk["start"]), int(chunk["end"])
-            intact = (folder / chunk["file"]).is_file() and end <= filled
+            intact = (folder / chunk["file"]).is_file() and end <= used
             if not intact or _digest(arrays, start, end) != chunk["digest"]:
                 chunks = []  # rows changed under a stored chunk: store everything again
                 break
             chunks.append(chunk)
     start = chunks[-1]["end"] if chunks else 0
-    if filled > start:
-        digest = _digest(arrays, start, filled)
-        name = _write_chunk(arrays, start, filled, folder, digest)
-        chunks.append({"start": start, "end": filled, "file": name, "digest": digest})
+    if used > start:
+        digest = _digest(arrays, start, used)
+        name = _write_chunk(arrays, start, used, folder, digest)
+        chunks.append({"start": start, "end": used, "file": name, "digest": digest})
     skeleton = copy.copy(buffer)
     for attr, value in vars(buffer).items():  # its own dicts, so emptying leaves `buffer` whole
         if isinstance(value, dict):
@@ -153,7 +154,7 @@ def store_buffer(buffer: Any, folder: Path, previous: dict[str, Any] | None = No
         _put(skeleton, name, np.empty((0, *array.shape[1:]), dtype=array.dtype))
     return {
         "format": FORMAT,
-        "filled": filled,
+        "filled": used,
         "arrays": {n: {"shape": list(a.shape), "dtype": a.dtype.str} for n, a in arrays.items()},
         "chunks": chunks,
         "buffer": base64.b64encode(pickle.dumps(skeleton, protocol=4)).decode("ascii"),

@@ -49,6 +49,7 @@ from stable_baselines3.common.utils import polyak_update
 from torch import nn
 from torch.nn import functional as F
 
+from advgame.agents.common.replay_store import filled
 from advgame.agents.ompo.nets import OMPOPolicy, SigmoidTanh
 
 __all__ = ["OMPO", "OMPOReplayBuffer", "TransitionDiscriminator"]
@@ -124,8 +125,7 @@ class OMPOReplayBuffer(ReplayBuffer):
 
     def recent(self, count: int) -> np.ndarray:
         """Row indices of the latest `count` additions (of every env), newest last."""
-        upper = self.buffer_size if self.full else self.pos
-        count = min(count, upper)
+        count = min(count, filled(self))
         return (self.pos - count + np.arange(count)) % self.buffer_size
 
     def rows(self, idx: np.ndarray, env: Any = None) -> Any:
@@ -222,7 +222,7 @@ class OMPO(SAC):
         assert isinstance(buf, OMPOReplayBuffer)
         env = self._vec_normalize_env
         local = buf.recent(max(1, self.local_size // self.n_envs))
-        upper = buf.buffer_size if buf.full else buf.pos
+        upper = filled(buf)
         losses = []
         for _ in range(self.disc_rounds):
             draw = np.random.choice(  # noqa: NPY002

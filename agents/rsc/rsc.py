@@ -37,6 +37,7 @@ from stable_baselines3.common.type_aliases import ReplayBufferSamples
 from stable_baselines3.common.utils import polyak_update, update_learning_rate
 from torch.nn import functional as F
 
+from advgame.agents.common.replay_store import filled
 from advgame.agents.rsc.model import CausalWorldModel, perturb_states
 
 __all__ = ["MODE_ERROR_EVERY", "RSC", "one_step_samples"]
@@ -48,9 +49,8 @@ MODE_ERROR_EVERY = 100
 
 def one_step_samples(buffer: ReplayBuffer, count: int, env: Any = None) -> ReplayBufferSamples:
     """`count` plain one-step transitions from any SB3 replay buffer, n-step ones included."""
-    upper = buffer.buffer_size if buffer.full else buffer.pos
     # SB3's buffers draw from the global generator SB3 seeds; so does RSC
-    idx = np.random.randint(0, upper, size=count)  # noqa: NPY002
+    idx = np.random.randint(0, filled(buffer), size=count)  # noqa: NPY002
     return ReplayBuffer._get_samples(buffer, idx, env=env)
 
 
