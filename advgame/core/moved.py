@@ -123,14 +123,7 @@ def current(module: str, name: str | None = None) -> tuple[str, str | None]:
         ('advgame.core.game', 'Game')
 
     """
-    for _ in range(len(MOVED) + len(MOVED_NAMES) + 1):  # a chain of moves, never a circle
-        if name is not None and (module, name) in MOVED_NAMES:
-            module, name = MOVED_NAMES[module, name]
-        elif module in MOVED:
-            module = MOVED[module]
-        else:
-            return module, name
-    raise RuntimeError(f"advgame.core.moved: the moves of {module!r} form a circle")
+    return _follow(module, name, MOVED, MOVED_NAMES)
 
 
 def former(module: str, name: str) -> tuple[str, str]:
@@ -143,11 +136,22 @@ def former(module: str, name: str) -> tuple[str, str]:
         ('advgame.training.checkpoint', 'SB3Checkpoint')
 
     """
-    for _ in range(len(MOVED) + len(MOVED_NAMES) + 1):
-        if (module, name) in _FORMER_NAMES:
-            module, name = _FORMER_NAMES[module, name]
-        elif module in _FORMER:
-            module = _FORMER[module]
+    old_module, old_name = _follow(module, name, _FORMER, _FORMER_NAMES)
+    return old_module, old_name or name
+
+
+def _follow(
+    module: str,
+    name: str | None,
+    modules: dict[str, str],
+    names: dict[tuple[str, str], tuple[str, str]],
+) -> tuple[str, str | None]:
+    """Follow a chain of moves (forward or back) from `module` and `name` to its end."""
+    for _ in range(len(MOVED) + len(MOVED_NAMES) + 1):  # a chain of moves, never a circle
+        if name is not None and (module, name) in names:
+            module, name = names[module, name]
+        elif module in modules:
+            module = modules[module]
         else:
             return module, name
     raise RuntimeError(f"advgame.core.moved: the moves of {module!r} form a circle")
