@@ -230,6 +230,17 @@ def test_every_source_folder_is_a_package_and_nothing_in_it_is_ignored() -> None
     assert not ignored, f"source files a clone would lack (.gitignore matches them): {ignored}"
 
 
+def test_every_package_is_in_the_distribution() -> None:
+    """A wheel holds only the packages pyproject lists: a new room must be listed there."""
+    import tomllib
+
+    listed = set(
+        tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
+    packages = {name for name, path in MODULES.items() if path.name == "__init__.py"}
+    assert packages <= listed, f"add to [tool.setuptools] packages: {sorted(packages - listed)}"
+
+
 def test_package_inits_hold_no_logic() -> None:
     """Each folder's ``__init__`` opens with what the folder is for and defines nothing."""
     for name, path in MODULES.items():
