@@ -159,7 +159,7 @@ class PAADAttack(_Attack):
         (`advgame.adversaries.paad_director.train_director`); the result is written
         under the cache folder and returned as an `SB3Checkpoint`.
         """
-        from advgame.agents.checkpoint import SB3Checkpoint
+        from advgame.agents.common.checkpoint import SB3Checkpoint
 
         key, folder = self._cached(game, agent, target, victim)
         if key not in _DIRECTORS:

@@ -118,9 +118,9 @@ def train_director(
         phase: the game phase to train in (the attack's evaluation phase).
 
     """
-    from advgame.agents.sb3 import PPOConfig
-    from advgame.agents.side import Side
-    from advgame.agents.stats import normalized
+    from advgame.agents.common.side import Side
+    from advgame.agents.common.stats import normalized
+    from advgame.agents.sb3.config import PPOConfig
     from advgame.core.vector import VectorView
     from advgame.core.views import view_factory
 

@@ -91,7 +91,7 @@ def victim_fingerprint(victim: WhiteBox, size: int) -> list[bytes]:
 def _recurrent_probe(victim: Any, probes: torch.Tensor) -> bytes:
     """The mean actions of a recurrent victim along `probes` played in order from a zero memory.
 
-    (`advgame.agents.recurrent_policy.RecurrentSB3Policy.episode_means`: the victim's own memory
+    (`advgame.agents.common.recurrent_policy.RecurrentSB3Policy.episode_means`: the victim's own memory
     is untouched.)
     """
     inner = victim

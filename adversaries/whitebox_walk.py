@@ -7,7 +7,7 @@ random starts inside the budget: every game of one `batch_key` in one walk over 
 through the victim's `NumpyNet` where there is one (no torch per step), else through torch's
 autograd. The spec says what the walk maximises; this module says how it walks.
 
-A recurrent victim (an LSTM policy, `advgame.agents.recurrent_policy.RecurrentSB3Policy`) is
+A recurrent victim (an LSTM policy, `advgame.agents.common.recurrent_policy.RecurrentSB3Policy`) is
 walked with the memory it carries at the sense move of step t, before it acts on the perturbed
 observation (so the perturbation of step t is computed from the memory of step t, as ATLA's
 attacks are, and the victim's memory then advances on what it was shown). Its ``batch_key`` is
@@ -102,7 +102,7 @@ class WhiteBoxAttackPolicy:
                 raise ConfigError(
                     f"{type(self.spec).__name__} on {self.agent!r} needs white-box access to "
                     f"{target!r}'s policy, but it is {type(victim).__name__}. White-box policies: "
-                    "SB3 checkpoints (advgame.agents.checkpoint.SB3Checkpoint/SB3Policy) and MAPPO/IPPO "
+                    "SB3 checkpoints (advgame.agents.common.checkpoint.SB3Checkpoint/SB3Policy) and MAPPO/IPPO "
                     "actors; a learner being trained inside a view cannot be attacked this way."
                 )
             space = self.disruptor.spaces.get(target)  # Box targets only; Dicts have plans

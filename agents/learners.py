@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from advgame.agents.dbc_config import DBCConfig
-from advgame.agents.ompo_config import OMPOConfig
-from advgame.agents.recurrent import RecurrentPPOConfig
-from advgame.agents.rsc_config import RSCConfig
-from advgame.agents.sa_recurrent_config import SARecurrentPPOConfig
-from advgame.agents.sb3 import PPOConfig, SACConfig, SAPPOConfig, TD3Config
+from advgame.agents.dbc.config import DBCConfig
+from advgame.agents.ompo.config import OMPOConfig
+from advgame.agents.recurrent.config import RecurrentPPOConfig
+from advgame.agents.rsc.config import RSCConfig
+from advgame.agents.sa.config import SAPPOConfig, SARecurrentPPOConfig
+from advgame.agents.sb3.config import PPOConfig, SACConfig, TD3Config
 
 __all__ = ["LEARNERS"]
 

@@ -135,7 +135,7 @@ def make_checkpoints(folder: Path, env: str) -> dict[str, Any]:
     import gymnasium as gym
     from stable_baselines3 import PPO
 
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
 
     out = {}
     for seed in (1, 2):

@@ -40,7 +40,7 @@ def main() -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     from calibrate import step_us
 
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
     from advgame.evaluation import AdversarySetup, evaluate, population_jobs
     from advgame.evaluation.attacks.optimal import SB3_RECIPE
     from advgame.evaluation.table.threat import observation_agent

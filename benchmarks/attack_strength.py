@@ -163,7 +163,7 @@ def _strength(args: argparse.Namespace) -> None:
     """Issue 36: advgame's searched optimal attack beside an outside SB3 adversary, one table."""
     from calibrate import step_us
 
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
     from advgame.core.registry import scenario_spec
     from advgame.evaluation import AdversarySetup, evaluate, population_jobs
     from advgame.evaluation.attacks.optimal import OPTIMAL_GRID, OptimalSearch, optimal_jobs

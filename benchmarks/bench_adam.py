@@ -2,7 +2,7 @@
 
 On the CPU, Adam's default is a Python loop over the parameters, several small kernels each,
 and a 64-wide PPO has a dozen parameter tensors updated 320 times a rollout; advgame's SB3
-learners use the foreach kernel (``optimizer_kwargs={"foreach": True}``, `advgame.agents.sb3`:
+learners use the foreach kernel (``optimizer_kwargs={"foreach": True}``, `advgame.agents.sb3.config`:
 the fused one does not mark the tensors it updates, which NumPy copies of a live learner
 check), OMPO, RSC and DBC the fused one (docs/throughput.md). This builds three PPOs
 with advgame's `PPOConfig` on Hopper-v5 (4 envs, one torch thread), identical but for Adam's

@@ -133,7 +133,7 @@ def lstm_rates(folder: Path, episodes: int, rounds: int) -> dict[str, list[float
 
 def _through_torch(fn: Any) -> Any:
     """`fn()` with the recurrent victim's NumPy copy withheld: the walk goes through torch."""
-    from advgame.agents.recurrent_policy import RecurrentSB3Policy
+    from advgame.agents.common.recurrent_policy import RecurrentSB3Policy
 
     saved = RecurrentSB3Policy.numpy_net
     RecurrentSB3Policy.numpy_net = lambda self, head: None  # type: ignore[method-assign]

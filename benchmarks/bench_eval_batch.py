@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from advgame.agents.checkpoint import SB3Checkpoint
+from advgame.agents.common.checkpoint import SB3Checkpoint
 from advgame.core.views import view_factory
 from advgame.evaluation import AdversarySetup, evaluate, population_jobs, run_job
 from advgame.evaluation.table.batched import play_job_sequential

@@ -30,8 +30,8 @@ import torch
 from calibrate import line, step_us
 from sb3_contrib import RecurrentPPO
 
-from advgame.agents.checkpoint import SB3Checkpoint
-from advgame.agents.recurrent_policy import RecurrentSB3Policy
+from advgame.agents.common.checkpoint import SB3Checkpoint
+from advgame.agents.common.recurrent_policy import RecurrentSB3Policy
 from advgame.core.vector import VectorView
 from advgame.core.views import view_factory
 

@@ -28,9 +28,9 @@ import numpy as np
 import torch
 
 from advgame.adversaries import GaussianAdversary
-from advgame.agents.marl import IPPOConfig, MAPPOConfig, TeamLearner
-from advgame.agents.marl_shared import SharedIPPO
-from advgame.agents.sb3 import PPOConfig
+from advgame.agents.marl.marl import IPPOConfig, MAPPOConfig, TeamLearner
+from advgame.agents.marl.shared import SharedIPPO
+from advgame.agents.sb3.config import PPOConfig
 from advgame.core.team import team_factory
 
 SID = "MA-HalfCheetah-2x3"

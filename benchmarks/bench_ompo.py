@@ -1,9 +1,9 @@
 """OMPO's training speed beside SB3's SAC with the same networks, in one run (issue 38).
 
 Both learn on a raw Gymnasium task (default Hopper-v5, one env, no normalizer) with OMPO's
-networks (`advgame.agents.ompo_nets.OMPOPolicy`: [256, 256], LayerNorm + tanh then ELU), batch
+networks (`advgame.agents.ompo.nets.OMPOPolicy`: [256, 256], LayerNorm + tanh then ELU), batch
 256, 3 updates per environment step, the actor and targets every 2nd update: SAC is SB3's
-`SAC` with those settings, OMPO is `advgame.agents.ompo.OMPO` (OMPO's losses, plus its
+`SAC` with those settings, OMPO is `advgame.agents.ompo.ompo.OMPO` (OMPO's losses, plus its
 discriminator: 10 x 20 updates of batch 256 every 1,000 steps). Each first takes `--start`
 random steps (no updates), then `--steps` learning steps; the rate is learning steps per wall
 second. Where OMPO's time goes is measured by timing its parts inside the same run. One torch
@@ -11,7 +11,7 @@ thread (as training workers use). The calibration (a raw HalfCheetah-v5 step) is
 before and after, so the rates can be scaled to another day's machine.
 
 It also trains OMPO with PyTorch's own tanh and Adam's for-loop kernel (``ompo-torch-tanh``: what
-OMPO ran before `advgame.agents.ompo_nets.SigmoidTanh` and the fused Adam), for their speed-up.
+OMPO ran before `advgame.agents.ompo.nets.SigmoidTanh` and the fused Adam), for their speed-up.
 
 Run: ``python benchmarks/bench_ompo.py [--env Hopper-v5] [--steps 2000] [--repeats 2]``.
 """
@@ -32,8 +32,8 @@ from calibrate import line, step_us
 from stable_baselines3 import SAC
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from advgame.agents.ompo import OMPO
-from advgame.agents.ompo_nets import OMPOPolicy, SigmoidTanh
+from advgame.agents.ompo.nets import OMPOPolicy, SigmoidTanh
+from advgame.agents.ompo.ompo import OMPO
 
 COMMON: dict[str, Any] = {
     "batch_size": 256,

@@ -11,7 +11,7 @@ per rollout of ``--n-steps`` steps on each of ``--n-envs`` envs), in interleaved
   sequences per gradient step, nearer ATLA's full-batch LSTM update; fewer, longer passes);
 * ``lstm bN loop``: the same config trained by sb3-contrib's own ``RecurrentPPO``, whose
   update loops in Python over the steps of every minibatch that holds an episode start (advgame
-  trains `advgame.agents.recurrent_ppo.UnrolledRecurrentPPO`: one LSTM call per minibatch);
+  trains `advgame.agents.recurrent.ppo.UnrolledRecurrentPPO`: one LSTM call per minibatch);
 * ``lstm-sa bN``: that with the SA regulariser (`advgame.agents.SARecurrentPPOConfig`: κ 0.3,
   2 PGD steps, ε 0.075 from the first step): ATLA-LSTM-SA's protagonist.
 

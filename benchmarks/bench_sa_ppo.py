@@ -5,13 +5,13 @@ Five learners train on Hopper-v5 with ATLA's PPO update (2,048 steps per update 
 ``--steps`` environment steps each:
 
 * ``ppo``: Stable-Baselines3's PPO;
-* ``sa-ppo``: `advgame.agents.sa_ppo.SAPPO` (κ 0.1, ε 0.075 from the first step, 10 PGD steps
+* ``sa-ppo``: `advgame.agents.sa.ppo.SAPPO` (κ 0.1, ε 0.075 from the first step, 10 PGD steps
   per minibatch), its inner maximisation through the NumPy copy of the actor;
 * ``sa-ppo torch``: the same with the inner maximisation through torch's autograd (the path
   before the NumPy walk, and the one other policies take);
 * ``recurrent-ppo``: sb3-contrib's RecurrentPPO (``MlpLstmPolicy``: 256-unit LSTMs before the
   actor's and the critic's [64, 64]), the ATLA-LSTM learner;
-* ``sa-recurrent-ppo``: `advgame.agents.sa_recurrent.SARecurrentPPO`, the same with the
+* ``sa-recurrent-ppo``: `advgame.agents.sa.recurrent.SARecurrentPPO`, the same with the
   sequence regulariser of ATLA-LSTM-SA (κ 0.3, ε 0.075 from the first step, 2 PGD steps).
 
 Reported: the median steps per second of each, and each one's ratio per round (median and
@@ -37,8 +37,8 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 from advgame.agents import sa_ppo
-from advgame.agents.sa_ppo import SAPPO
-from advgame.agents.sa_recurrent import SARecurrentPPO
+from advgame.agents.sa.ppo import SAPPO
+from advgame.agents.sa.recurrent import SARecurrentPPO
 
 ENV = "Hopper-v5"
 BASELINE = {"ppo": "ppo", "sa-ppo": "ppo", "sa-ppo torch": "ppo",

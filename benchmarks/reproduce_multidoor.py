@@ -64,7 +64,7 @@ def _train(seed: int, args: argparse.Namespace) -> dict[str, str]:
 
 
 def _learned_arm(run_dir: Path) -> Any:
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
 
     folder = run_dir / json.loads((run_dir / "state.json").read_text())["checkpoint"]
     norm = folder / "arm_adversary_obs_norm.npz"

@@ -11,7 +11,7 @@
 * **Success and true goals**: every step's info has ``is_success`` (Fetch and Hand report it;
   Maze and Adroit say ``success``; Kitchen succeeds when no task is left), and for Box goals
   ``true_achieved_goal``/``true_desired_goal``, the goals the task rewards against, which HER
-  relabels with (`advgame.agents.her`). `compute_reward` is the task's own.
+  relabels with (`advgame.agents.sb3.her`). `compute_reward` is the task's own.
 
 Rewards come from the simulator's true state: an observation disruptor changes only the copy the
 protagonist is shown, never what the task computes its reward and success from.

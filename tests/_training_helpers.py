@@ -10,7 +10,7 @@ from typing import Any
 
 import torch
 
-from advgame.agents.checkpoint import SB3Checkpoint, _algo_class
+from advgame.agents.common.checkpoint import SB3Checkpoint, _algo_class
 from advgame.core.config import load_json
 from advgame.training import METHODS, TrainConfig
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from stable_baselines3 import PPO
 
-from advgame.agents.checkpoint import SB3Checkpoint, SB3Policy
+from advgame.agents.common.checkpoint import SB3Checkpoint, SB3Policy
 from advgame.core.views import view_factory
 from advgame.errors import ConfigError
 from advgame.evaluation import (

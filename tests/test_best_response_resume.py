@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 import torch
 
-from advgame.agents.checkpoint import SB3Checkpoint
+from advgame.agents.common.checkpoint import SB3Checkpoint
 from advgame.core.progress import listening
 from advgame.core.scratch import scratch_folder
 from advgame.runner.run import JobFailedError, run_units
@@ -94,7 +94,7 @@ class _Stop(RuntimeError):
 def test_a_stopped_job_goes_on_from_its_last_save_and_its_folder_goes_with_its_part(
     pendulum_ppo: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, algo: str
 ) -> None:
-    from advgame.agents.side import Side
+    from advgame.agents.common.side import Side
 
     job, parts = _job(pendulum_ppo, algo=algo), tmp_path / "parts"
     learned: list[int] = []
@@ -123,7 +123,7 @@ def test_a_stopped_job_goes_on_from_its_last_save_and_its_folder_goes_with_its_p
     run_units(train_best_response, [job], parts_dir=parts, max_retries=0, scratch=True)
     assert not list(parts.glob("*.scratch"))  # read back, its stale folder removed
     assert (parts / f"{record.key}.pkl").is_file()
-    from advgame.agents.checkpoint import _algo_class
+    from advgame.agents.common.checkpoint import _algo_class
 
     # without scratch=True (PSRO: a resumed run is the uninterrupted one) no folder is given
     learned.clear()

@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from advgame.agents.checkpoint import load_model, load_normalizer
+from advgame.agents.common.checkpoint import load_model, load_normalizer
 from advgame.cli import main
 from advgame.core.config import load_json
 from advgame.errors import FileFormatError

@@ -2,7 +2,7 @@
 
 Every check here can fail: the losses are recomputed from the formulas of the authors' code
 (``facebookresearch/deep_bisim4control``: ``agent/bisim_agent.py``, ``transition_model.py``)
-with the networks' own layers but none of `advgame.agents.dbc`'s code; each loss must reach
+with the networks' own layers but none of `advgame.agents.dbc.dbc`'s code; each loss must reach
 exactly the networks the authors let it train; on a task with a distractor observation the
 trained encoder must shrink the distractor (an untrained one does not), and the bisimulation
 loss must shrink it further than the model losses alone.
@@ -22,8 +22,8 @@ from stable_baselines3.common.type_aliases import ReplayBufferSamples
 from stable_baselines3.common.vec_env import DummyVecEnv
 from torch import nn
 
-from advgame.agents.dbc import DBC
-from advgame.agents.dbc_config import DBCConfig
+from advgame.agents.dbc.config import DBCConfig
+from advgame.agents.dbc.dbc import DBC
 from advgame.cli import main
 from advgame.errors import ConfigError
 

@@ -149,6 +149,54 @@ def test_no_circle_between_folders() -> None:
     assert not _cycles(folders), _cycles(folders)
 
 
+AGENT_ROOMS = [
+    ("common",),  # what every family shares: replay, normalizers, checkpoints, statistics
+    ("sb3",),  # SB3's own PPO/SAC/TD3: the configs the SB3-based families extend
+    ("sa", "recurrent", "marl", "safe", "ompo", "rsc", "dbc"),  # one room per learner family
+    ("learners", ""),  # the registry of single-agent configs, and the package's face
+]
+"""Rooms of `advgame.agents`, bottom to top (a room is ``advgame.agents.<room>``)."""
+FAMILIES = AGENT_ROOMS[2]
+
+FAMILY_EDGES = {
+    ("sa", "recurrent"): "SA-PPO's recurrent form is the unrolled LSTM PPO plus the regulariser: "
+    "SARecurrentPPO extends UnrolledRecurrentPPO, its config RecurrentPPOConfig",
+    ("safe", "marl"): "the constrained learners are team PPO with a cost critic: they reuse "
+    "MAPPO's networks, collector and update (TeamLearner, TeamPPOConfig)",
+}
+"""The only imports from one family into another, each with its reason."""
+
+
+def _room(module: str) -> str:
+    return module.split(".")[2] if module.count(".") >= 2 else ""
+
+
+def test_agents_rooms_import_down_and_families_not_each_other() -> None:
+    rank = {room: k for k, rooms in enumerate(AGENT_ROOMS) for room in rooms}
+    agents = {m for m in MODULES if m.startswith("advgame.agents")}
+    assert not {_room(m) for m in agents} - set(rank), "a room of agents/ is in no AGENT_ROOMS"
+    bad, used = [], set()
+    for a in sorted(agents):
+        for b in sorted(GRAPH[a] & agents):
+            ra, rb = _room(a), _room(b)
+            if ra == rb or rank[rb] < rank[ra] or (rank[rb] == rank[ra] and ra not in FAMILIES):
+                continue
+            if (ra, rb) in FAMILY_EDGES:
+                used.add((ra, rb))
+                continue
+            bad.append(f"{a} -> {b}")
+    assert not bad, "agents/ rooms importing sideways or up (move the shared part down):\n" + (
+        "\n".join(bad)
+    )
+    assert used == set(FAMILY_EDGES), f"allowed edges no longer used: {set(FAMILY_EDGES) - used}"
+
+
+def test_agents_has_no_flat_file_of_a_family() -> None:
+    flat = sorted(m for m in MODULES if m.startswith("advgame.agents.") and m.count(".") == 2
+                  and MODULES[m].name != "__init__.py")  # fmt: skip
+    assert flat == ["advgame.agents.learners"], f"put each in its family's room: {flat}"
+
+
 def test_every_file_is_under_the_limit() -> None:
     files = list(MODULES.values())
     long = {
@@ -182,6 +230,17 @@ def test_every_source_folder_is_a_package_and_nothing_in_it_is_ignored() -> None
     assert not ignored, f"source files a clone would lack (.gitignore matches them): {ignored}"
 
 
+def test_every_package_is_in_the_distribution() -> None:
+    """A wheel holds only the packages pyproject lists: a new room must be listed there."""
+    import tomllib
+
+    listed = set(
+        tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
+    packages = {name for name, path in MODULES.items() if path.name == "__init__.py"}
+    assert packages <= listed, f"add to [tool.setuptools] packages: {sorted(packages - listed)}"
+
+
 def test_package_inits_hold_no_logic() -> None:
     """Each folder's ``__init__`` opens with what the folder is for and defines nothing."""
     for name, path in MODULES.items():
@@ -200,8 +259,72 @@ def test_package_inits_hold_no_logic() -> None:
 # -- moved modules: what files name keeps loading ----------------------------------------
 def test_every_moved_module_exists_and_the_old_names_are_gone() -> None:
     for old, new in moved.MOVED.items():
-        assert new in MODULES, f"MOVED maps {old} to {new}, which does not exist"
-        assert old not in MODULES, f"{old} exists again: drop it from MOVED or rename the module"
+        last, _ = moved.current(new)
+        assert last in MODULES, f"MOVED maps {old} to {new}, and {last} does not exist"
+        # a module may become a folder of its own name (agents/rsc.py -> agents/rsc/)
+        assert old not in MODULES or MODULES[old].name == "__init__.py", (
+            f"{old} exists again: drop it from MOVED or rename the module"
+        )
+    news = list(moved.MOVED.values())
+    twice = sorted({n for n in news if news.count(n) > 1})
+    assert not twice, f"two old names for one module (`former` must be one): {twice}"
+
+
+def test_old_agents_names_are_the_new_modules_and_classes() -> None:
+    """Every old ``advgame.agents.*`` name imports (SB3 zips unpickle by it) as the new one."""
+    import importlib
+
+    from advgame.agents.common import aliases
+
+    names = aliases.old_names()
+    assert "advgame.agents.rsc_model" in names and "advgame.agents.checkpoint" in names
+    for old, new in names.items():
+        module, target = importlib.import_module(old), importlib.import_module(new)
+        if old not in MODULES:  # aliased: the very module object
+            assert module is target, old
+            continue
+        for attr in target.__all__:  # now its family's folder: the old module's public names
+            new_module, new_attr = moved.current(old, attr)
+            found = getattr(importlib.import_module(new_module), new_attr or attr)
+            assert found is getattr(target, attr), f"{old}.{attr}"
+            if (old, attr) not in moved.MOVED_NAMES:
+                assert getattr(module, attr) is found, f"{old}.{attr}"
+
+
+RELEASED = {  # zoo entry -> algo: each zip's data pickles classes under old agents names
+    "hopper/sa-ppo": "ppo",  # advgame.agents.sb3.LinearDecay (the learning-rate schedule)
+    "hopper-ompo/ompo": "ompo",  # advgame.agents.ompo_nets.OMPOPolicy, .ompo.OMPOReplayBuffer
+    "rs-liftcausal/dbc": "dbc",  # advgame.agents.dbc_nets.DBCPolicy
+    "rs-liftcausal/rsc": "rsc",  # none (SB3's SACPolicy): it loads through RSC's new module
+}
+
+
+@pytest.mark.parametrize("entry", sorted(RELEASED))
+def test_released_zips_load_after_the_agents_moved(entry: str) -> None:
+    """SB3 unpickles a zip's classes with plain pickle, by the module names written then."""
+    import base64
+    import zipfile
+
+    from advgame.agents.common.checkpoint import load_model
+
+    path = ROOT / "zoo" / entry / "protagonist.zip"
+    if not path.is_file():
+        pytest.skip(f"{path} is not in this checkout")
+    with zipfile.ZipFile(path) as archive:
+        data = json.loads(archive.read("data"))
+    old = {
+        key: pickle.loads(blob)  # what SB3's load does: no advgame reader in between
+        for key, value in data.items()
+        if isinstance(value, dict) and ":serialized:" in value
+        and b"advgame.agents." in (blob := base64.b64decode(value[":serialized:"]))
+    }  # fmt: skip
+    assert old or entry.endswith("/rsc"), f"{entry} names no advgame.agents class"
+    named = [v if isinstance(v, type) else type(v) for v in old.values()]
+    named = [cls for cls in named if cls.__module__.startswith("advgame.")]
+    assert all(cls.__module__ in MODULES for cls in named), named  # found at today's place
+    model = load_model(str(path), RELEASED[entry])
+    if "policy_class" in old:
+        assert type(model.policy) is old["policy_class"]
 
 
 def test_population_files_name_their_specs_by_old_paths_and_load() -> None:
@@ -237,7 +360,7 @@ def test_committed_part_files_load() -> None:
 
 
 def test_stable_pickle_writes_old_names_and_matches_the_c_pickler() -> None:
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
     from advgame.core.game import Game
     from advgame.evaluation.table.jobs import AdversarySetup
 
@@ -264,7 +387,7 @@ def test_a_committed_campaign_finds_its_part_files_by_the_keys_of_its_units(
     """The Hopper campaign's optimal-attack units, built now, are named as before the move.
 
     Their pickles spell `BestResponseJob` and `SB3Checkpoint`, whose modules moved
-    (`advgame.training.checkpoint` -> `advgame.agents.checkpoint`): the keys must not.
+    (`advgame.training.checkpoint` -> `advgame.agents.common.checkpoint`): the keys must not.
     """
     from advgame.core.registry import make
     from advgame.evaluation.attacks.optimal import OPTIMAL_GRID

@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 
 from advgame.agents import PPOConfig
-from advgame.agents.side import Side
+from advgame.agents.common.side import Side
 from advgame.core.views import view_factory
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

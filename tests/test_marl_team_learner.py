@@ -19,12 +19,18 @@ import torch
 
 import advgame
 from advgame.adversaries import GaussianAdversary
-from advgame.agents.checkpoint import SB3Policy
-from advgame.agents.marl import MARL_LEARNERS, IPPOConfig, MAPPOConfig, TeamLearner, TeamPPOConfig
-from advgame.agents.marl_nets import TorchActorCheckpoint, TorchActorPolicy
-from advgame.agents.sb3 import PPOConfig
-from advgame.agents.side import Side
-from advgame.agents.stats import EpisodeStats
+from advgame.agents.common.checkpoint import SB3Policy
+from advgame.agents.common.side import Side
+from advgame.agents.common.stats import EpisodeStats
+from advgame.agents.marl.marl import (
+    MARL_LEARNERS,
+    IPPOConfig,
+    MAPPOConfig,
+    TeamLearner,
+    TeamPPOConfig,
+)
+from advgame.agents.marl.nets import TorchActorCheckpoint, TorchActorPolicy
+from advgame.agents.sb3.config import PPOConfig
 from advgame.core.config import field_docs
 from advgame.core.episodes import rollout
 from advgame.core.policy import ConstantPolicy

@@ -22,10 +22,10 @@ from stable_baselines3 import PPO
 
 import advgame
 from advgame.adversaries import GaussianAdversary
-from advgame.agents.checkpoint import SB3Checkpoint
-from advgame.agents.marl_shared import SharedIPPO
-from advgame.agents.sb3 import PPOConfig
-from advgame.agents.stats import EpisodeStats
+from advgame.agents.common.checkpoint import SB3Checkpoint
+from advgame.agents.common.stats import EpisodeStats
+from advgame.agents.marl.shared import SharedIPPO
+from advgame.agents.sb3.config import PPOConfig
 from advgame.core.episodes import build_policies, filler_action, rollout
 from advgame.core.policy import ConstantPolicy
 from advgame.core.team import TeamView, team_factory

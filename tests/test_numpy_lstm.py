@@ -22,7 +22,7 @@ from torch import nn
 import advgame
 from advgame.adversaries.whitebox import CriticAttack, MADAttack
 from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
-from advgame.agents.recurrent_policy import RecurrentSB3Policy
+from advgame.agents.common.recurrent_policy import RecurrentSB3Policy
 from advgame.core.episodes import build_policies
 from advgame.core.numpy_lstm import _sigmoid
 from advgame.core.numpy_net import NumpyNet

@@ -15,7 +15,7 @@ import advgame
 from advgame.adversaries import MaxCostAttack, RobustSarsaAttack
 from advgame.adversaries.whitebox import CriticAttack, MADAttack
 from advgame.adversaries.whitebox_walk import WhiteBoxAttackPolicy
-from advgame.agents.checkpoint import SB3Policy
+from advgame.agents.common.checkpoint import SB3Policy
 from advgame.core.episodes import build_policies
 from advgame.core.numpy_net import NumpyNet
 from advgame.disruptors import ObservationDisruptor

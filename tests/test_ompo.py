@@ -2,7 +2,7 @@
 
 Every check here can fail: the losses are recomputed from the formulas of the authors' code
 (``Roythuly/OMPO``: ``model/algo.py``) with the networks' own layers but none of
-`advgame.agents.ompo`'s code; the discriminator must separate two transition models it was
+`advgame.agents.ompo.ompo`'s code; the discriminator must separate two transition models it was
 trained on and not two samples of one; the schedule is counted.
 """
 
@@ -16,8 +16,8 @@ from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from advgame.agents.ompo import OMPO, OMPOReplayBuffer, TransitionDiscriminator
-from advgame.agents.ompo_config import OMPOConfig
+from advgame.agents.ompo.config import OMPOConfig
+from advgame.agents.ompo.ompo import OMPO, OMPOReplayBuffer, TransitionDiscriminator
 from advgame.errors import ConfigError
 
 GAMMA, TOMAC, P, MIX = 0.99, 1e-3, 1.5, 0.05
@@ -233,7 +233,7 @@ def test_ompo_learns_to_balance_the_inverted_pendulum() -> None:
 
 
 def test_sigmoid_tanh_is_tanh_in_value_gradient_and_second_gradient() -> None:
-    from advgame.agents.ompo_nets import OMPOPolicy, SigmoidTanh
+    from advgame.agents.ompo.nets import OMPOPolicy, SigmoidTanh
 
     x = th.linspace(-12, 12, 2001, dtype=th.float64).reshape(-1, 1).requires_grad_(True)
     fast = SigmoidTanh()

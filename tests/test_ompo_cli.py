@@ -33,7 +33,7 @@ def _rows(path: Path) -> list[dict[str, str]]:
 
 
 def test_ompo_trains_on_the_shifting_hopper_resumes_and_evaluates(tmp_path: Path) -> None:
-    from advgame.agents.ompo import OMPO
+    from advgame.agents.ompo.ompo import OMPO
 
     run = tmp_path / "ompo"
     assert main(_args(run)) == 0

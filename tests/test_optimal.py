@@ -74,7 +74,7 @@ def test_a_checkpoint_gets_its_strongest_searched_adversary(
 def test_the_long_candidate_trains_first_with_its_scaled_budget(
     pendulum_ppo: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
     from advgame.evaluation.attacks.optimal import _search
     from advgame.evaluation.table.threat import default_threat, observation_agent
 

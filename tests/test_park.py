@@ -12,8 +12,8 @@ import pytest
 from gymnasium import spaces
 from stable_baselines3.common.buffers import DictReplayBuffer, ReplayBuffer
 
-from advgame.agents.ompo import OMPOReplayBuffer
-from advgame.agents.replay_store import load_buffer, row_arrays, store_buffer
+from advgame.agents.common.replay_store import load_buffer, row_arrays, store_buffer
+from advgame.agents.ompo.ompo import OMPOReplayBuffer
 from advgame.cli import main
 from advgame.errors import FileFormatError
 from advgame.workflows.campaign import load_campaign

@@ -14,7 +14,7 @@ import torch
 
 from advgame.adversaries import MADAttack
 from advgame.agents import PPOConfig
-from advgame.agents.side import Side
+from advgame.agents.common.side import Side
 from advgame.cli import main
 from advgame.core.views import view_factory
 

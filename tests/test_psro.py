@@ -152,7 +152,7 @@ def test_a_run_directory_is_not_started_twice_and_configs_are_checked(whole_run:
 
 def test_unit_keys_depend_on_values_not_on_shared_objects() -> None:
     """A spec built here and the same spec read back from JSON name the same part file."""
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
     from advgame.runner.run import unit_key
 
     path = "/runs/x/protagonist.zip"

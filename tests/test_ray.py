@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from advgame.agents.checkpoint import SB3Checkpoint
+from advgame.agents.common.checkpoint import SB3Checkpoint
 from advgame.core.policy import ConstantPolicy
 from advgame.errors import ConfigError
 from advgame.evaluation import budget_sweep, evaluate
@@ -89,7 +89,7 @@ def fail(unit: tuple[str, str]) -> int:
 
 def fingerprint(spec: SB3Checkpoint) -> tuple[int, float]:
     """This worker's pid and the sum of the weights of the model it has for `spec`."""
-    from advgame.agents.checkpoint import load_model
+    from advgame.agents.common.checkpoint import load_model
 
     params = load_model(spec.path, spec.algo).policy.parameters()
     return os.getpid(), float(sum(p.detach().sum() for p in params))

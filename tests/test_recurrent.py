@@ -19,9 +19,9 @@ import torch
 
 import advgame
 from advgame.agents import LEARNERS, PPOConfig
-from advgame.agents.checkpoint import SB3Checkpoint, load_model, saved_recurrent
-from advgame.agents.recurrent import RecurrentPPOConfig
-from advgame.agents.recurrent_policy import RecurrentSB3Policy
+from advgame.agents.common.checkpoint import SB3Checkpoint, load_model, saved_recurrent
+from advgame.agents.common.recurrent_policy import RecurrentSB3Policy
+from advgame.agents.recurrent.config import RecurrentPPOConfig
 from advgame.cli import main
 from advgame.core.episodes import build_policies, rollout, rollout_batch
 from advgame.core.policy import AgentInfo

@@ -23,8 +23,8 @@ import advgame
 from advgame.adversaries import MADAttack
 from advgame.adversaries.sarsa_critic import collect, probe_observations
 from advgame.adversaries.whitebox import victim_fingerprint
-from advgame.agents.checkpoint import SB3Checkpoint
-from advgame.agents.recurrent_policy import RecurrentSB3Policy
+from advgame.agents.common.checkpoint import SB3Checkpoint
+from advgame.agents.common.recurrent_policy import RecurrentSB3Policy
 from advgame.cli import main
 from advgame.core.episodes import build_policies, reseed_policies
 from advgame.core.views import SingleAgentView

@@ -1,4 +1,4 @@
-"""RecurrentPPO's update with each minibatch unrolled in one LSTM call (`agents/recurrent_ppo.py`).
+"""RecurrentPPO's update with each minibatch unrolled in one LSTM call (`agents/recurrent/ppo.py`).
 
 The unrolled minibatch must give sb3-contrib's numbers: the same values and log-probabilities
 bit for bit, and the same training up to float rounding (the per-step gradient terms are summed
@@ -17,8 +17,8 @@ from sb3_contrib.common.recurrent.buffers import RecurrentRolloutBuffer
 from stable_baselines3.common.env_util import make_vec_env
 
 from advgame.agents.learners import LEARNERS
-from advgame.agents.recurrent_ppo import UnrolledRecurrentPPO, UnrolledRolloutBuffer, unrolled
-from advgame.agents.sa_recurrent import SARecurrentPPO
+from advgame.agents.recurrent.ppo import UnrolledRecurrentPPO, UnrolledRolloutBuffer, unrolled
+from advgame.agents.sa.recurrent import SARecurrentPPO
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -292,7 +292,7 @@ def test_her_stores_what_was_seen_and_relabels_with_true_goals(one_torch_thread:
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     from advgame.agents import SACConfig
-    from advgame.agents.her import TrueGoalHerReplayBuffer
+    from advgame.agents.sb3.her import TrueGoalHerReplayBuffer
 
     venv = DummyVecEnv([_her_view])
     config = SACConfig(her=True, learning_starts=50, buffer_size=500, batch_size=16, net_arch=(32,))
@@ -348,7 +348,7 @@ def test_her_needs_true_goals_in_info_and_a_goal_task() -> None:
 
 
 def test_training_loop_runs_sac_her_under_attack(tmp_path: Any, one_torch_thread: None) -> None:
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
     from advgame.training import train
     from advgame.training.config import TrainConfig
 

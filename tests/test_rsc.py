@@ -20,9 +20,9 @@ from gymnasium import spaces
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from advgame.agents.rsc import RSC, one_step_samples
-from advgame.agents.rsc_config import RSCConfig
-from advgame.agents.rsc_model import CausalWorldModel, perturb_states
+from advgame.agents.rsc.config import RSCConfig
+from advgame.agents.rsc.model import CausalWorldModel, perturb_states
+from advgame.agents.rsc.rsc import RSC, one_step_samples
 from advgame.cli import main
 from advgame.errors import ConfigError
 

@@ -14,7 +14,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from advgame.agents import sa_ppo
-from advgame.agents.sa_ppo import SAPPO, sa_regulariser
+from advgame.agents.sa.ppo import SAPPO, sa_regulariser
 from advgame.cli import main
 
 

@@ -17,10 +17,10 @@ from sb3_contrib.ppo_recurrent.policies import MlpLstmPolicy
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import advgame
-from advgame.agents.checkpoint import SB3Checkpoint
-from advgame.agents.recurrent_policy import RecurrentSB3Policy
-from advgame.agents.recurrent_ppo import UnrolledRecurrentPPO
-from advgame.agents.sa_recurrent import SARecurrentPPO, recurrent_sa_regulariser
+from advgame.agents.common.checkpoint import SB3Checkpoint
+from advgame.agents.common.recurrent_policy import RecurrentSB3Policy
+from advgame.agents.recurrent.ppo import UnrolledRecurrentPPO
+from advgame.agents.sa.recurrent import SARecurrentPPO, recurrent_sa_regulariser
 from advgame.cli import main
 from advgame.errors import ConfigError
 from advgame.training.config import METHODS, learner_config

@@ -29,8 +29,14 @@ import advgame
 import advgame.cli
 import advgame.core.registry
 from advgame import ObservationDisruptor, RewardDisruptor
-from advgame.agents.safe import SAFE_LEARNERS, CRPOConfig, PCRPOConfig, PIDLagConfig, PPOLagConfig
-from advgame.agents.safe_ppo import project
+from advgame.agents.safe.ppo import project
+from advgame.agents.safe.safe import (
+    SAFE_LEARNERS,
+    CRPOConfig,
+    PCRPOConfig,
+    PIDLagConfig,
+    PPOLagConfig,
+)
 from advgame.core.team import team_factory
 from advgame.errors import ConfigError, UnknownNameError
 from advgame.evaluation import PayoffTable

@@ -25,7 +25,7 @@ import pytest
 
 import advgame.core.registry
 import advgame.training.loop
-from advgame.agents.checkpoint import _algo_class
+from advgame.agents.common.checkpoint import _algo_class
 from advgame.cli import main
 from advgame.core.episodes import rollout
 from advgame.training import train

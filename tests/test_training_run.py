@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import advgame.core.registry
-from advgame.agents.checkpoint import SB3Checkpoint
+from advgame.agents.common.checkpoint import SB3Checkpoint
 from advgame.cli import main
 from advgame.core.config import load_json
 from advgame.core.episodes import rollout

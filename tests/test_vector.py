@@ -19,7 +19,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan
 
 import advgame
 from advgame import adversaries as adv
-from advgame.agents.checkpoint import SB3Checkpoint, SB3Policy
+from advgame.agents.common.checkpoint import SB3Checkpoint, SB3Policy
 from advgame.core.policy import act_batch
 from advgame.core.vector import VectorView
 from advgame.core.views import view_factory
@@ -138,7 +138,7 @@ def test_adversary_views_batch_the_frozen_protagonist_and_count_clips_per_view(
 
 @pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
 def test_a_batched_forward_pass_gives_each_row_the_single_row_action(algo: str) -> None:
-    from advgame.agents.checkpoint import _algo_class
+    from advgame.agents.common.checkpoint import _algo_class
 
     model = _algo_class(algo)("MlpPolicy", gym.make("Hopper-v5"), seed=0, device="cpu")
     rng = np.random.default_rng(0)
@@ -194,8 +194,8 @@ def test_act_batch_asks_policies_without_a_common_key_one_by_one() -> None:
 
 def test_sb3_wrappers_and_ppo_learn_on_vector_views_of_both_sides(one_torch_thread: None) -> None:
     from advgame.agents import PPOConfig
-    from advgame.agents.side import Side
-    from advgame.agents.stats import EpisodeStats
+    from advgame.agents.common.side import Side
+    from advgame.agents.common.stats import EpisodeStats
 
     noise = {"observation_adversary": adv.GaussianAdversary(std=0.1)}
     for agent, policies, preset in (

@@ -11,7 +11,7 @@ import torch
 
 import advgame
 from advgame.adversaries.whitebox import CriticAttack, MADAttack, PGDAttack
-from advgame.agents.checkpoint import SB3Policy
+from advgame.agents.common.checkpoint import SB3Policy
 from advgame.core.episodes import build_policies, rollout
 from advgame.disruptors import ActionDisruptor, ObservationDisruptor
 from advgame.errors import ConfigError
@@ -205,7 +205,7 @@ def _state_bytes_of(optimizer: torch.optim.Optimizer) -> bytes:
 
 
 def test_mad_attacks_a_team_of_actors() -> None:
-    from advgame.agents.marl_nets import GaussianActor, TorchActorPolicy, actor_record
+    from advgame.agents.marl.nets import GaussianActor, TorchActorPolicy, actor_record
 
     pytest.importorskip("gymnasium_robotics", reason="MA-HalfCheetah-2x3 needs the mamujoco extra")
     game = advgame.make(

@@ -11,10 +11,15 @@ writer of such names go through this module:
   files);
 * `stable_pickle` writes a value as it would have been pickled before every move (old module
   names), so a unit's digest, and with it the name of its part file, does not change when the
-  code is reorganised.
+  code is reorganised;
+* files this module does not read, Stable-Baselines3's zips above all (their ``data`` holds
+  cloudpickled classes such as ``advgame.agents.dbc_nets.DBCPolicy``), import the old name
+  itself: `advgame.agents.common.aliases` makes every old ``advgame.agents.*`` name in `MOVED`
+  import as the module that replaced it.
 
-Add a line to `MOVED` for every module that moves; never remove one while a file in the wild may
-name it (tests/test_layers.py loads the committed part files and populations through it).
+Add a line to `MOVED` for every module that moves (a module that moves again gets a second line,
+from its last name: `current` and `former` follow the chain); never remove one while a file in
+the wild may name it (tests/test_layers.py loads the committed part files and populations through it).
 """
 
 from __future__ import annotations
@@ -55,10 +60,49 @@ MOVED: dict[str, str] = {
     "advgame.zoo": "advgame.workflows.zoo",
     "advgame.psro": "advgame.workflows.psro",
     "advgame.cli_campaign": "advgame.cli.campaign",
+    # 6 Dec 2026 (issue 71): agents/ as rooms, one folder per learner family and agents/common.
+    # An old module whose name is now its family's folder (sb3, marl, safe, ompo, rsc, dbc,
+    # recurrent) is that package, which exposes the old module's public names; the other old
+    # names import as the new module (advgame.agents.common.aliases), so SB3 zips load.
+    "advgame.agents.checkpoint": "advgame.agents.common.checkpoint",
+    "advgame.agents.forward": "advgame.agents.common.forward",
+    "advgame.agents.normalizer": "advgame.agents.common.normalizer",
+    "advgame.agents.replay_store": "advgame.agents.common.replay_store",
+    "advgame.agents.side": "advgame.agents.common.side",
+    "advgame.agents.stats": "advgame.agents.common.stats",
+    "advgame.agents.sb3_policy": "advgame.agents.common.sb3_policy",
+    "advgame.agents.recurrent_policy": "advgame.agents.common.recurrent_policy",
+    "advgame.agents.sb3": "advgame.agents.sb3.config",
+    "advgame.agents.her": "advgame.agents.sb3.her",
+    "advgame.agents.sa_ppo": "advgame.agents.sa.ppo",
+    "advgame.agents.sa_recurrent": "advgame.agents.sa.recurrent",
+    "advgame.agents.sa_recurrent_config": "advgame.agents.sa.config",
+    "advgame.agents.recurrent": "advgame.agents.recurrent.config",
+    "advgame.agents.recurrent_ppo": "advgame.agents.recurrent.ppo",
+    "advgame.agents.marl": "advgame.agents.marl.marl",
+    "advgame.agents.marl_nets": "advgame.agents.marl.nets",
+    "advgame.agents.marl_shared": "advgame.agents.marl.shared",
+    "advgame.agents.marl_collect": "advgame.agents.marl.collect",
+    "advgame.agents.marl_ppo": "advgame.agents.marl.ppo",
+    "advgame.agents.marl_norm": "advgame.agents.marl.norm",
+    "advgame.agents.safe": "advgame.agents.safe.safe",
+    "advgame.agents.safe_ppo": "advgame.agents.safe.ppo",
+    "advgame.agents.ompo": "advgame.agents.ompo.ompo",
+    "advgame.agents.ompo_nets": "advgame.agents.ompo.nets",
+    "advgame.agents.ompo_config": "advgame.agents.ompo.config",
+    "advgame.agents.rsc": "advgame.agents.rsc.rsc",
+    "advgame.agents.rsc_model": "advgame.agents.rsc.model",
+    "advgame.agents.rsc_config": "advgame.agents.rsc.config",
+    "advgame.agents.dbc": "advgame.agents.dbc.dbc",
+    "advgame.agents.dbc_nets": "advgame.agents.dbc.nets",
+    "advgame.agents.dbc_config": "advgame.agents.dbc.config",
 }
 """Old module name -> the module that holds its classes and functions now."""
 
-MOVED_NAMES: dict[tuple[str, str], tuple[str, str]] = {}
+MOVED_NAMES: dict[tuple[str, str], tuple[str, str]] = {
+    # 6 Dec 2026 (issue 71): SA-PPO's config joined its family (agents/sb3 is below agents/sa)
+    ("advgame.agents.sb3", "SAPPOConfig"): ("advgame.agents.sa.config", "SAPPOConfig"),
+}
 """Single classes moved out of a module that stayed: (module, name) -> (module, name)."""
 
 _FORMER = {new: old for old, new in MOVED.items()}
@@ -68,16 +112,18 @@ _FORMER_NAMES = {new: old for old, new in MOVED_NAMES.items()}
 def current(module: str, name: str | None = None) -> tuple[str, str | None]:
     """The (module, name) that an old `module` (and attribute `name`) refer to today.
 
+    A module that moved twice is followed to its last place.
+
     Example:
         >>> current("advgame.evaluation.jobs", "EvalJob")
         ('advgame.evaluation.table.jobs', 'EvalJob')
+        >>> current("advgame.training.checkpoint", "SB3Checkpoint")
+        ('advgame.agents.common.checkpoint', 'SB3Checkpoint')
         >>> current("advgame.core.game", "Game")
         ('advgame.core.game', 'Game')
 
     """
-    if name is not None and (module, name) in MOVED_NAMES:
-        return MOVED_NAMES[module, name]
-    return MOVED.get(module, module), name
+    return _follow(module, name, MOVED, MOVED_NAMES)
 
 
 def former(module: str, name: str) -> tuple[str, str]:
@@ -86,11 +132,29 @@ def former(module: str, name: str) -> tuple[str, str]:
     Example:
         >>> former("advgame.runner.units", "UnitRecord")
         ('advgame.evaluation.units', 'UnitRecord')
+        >>> former("advgame.agents.common.checkpoint", "SB3Checkpoint")
+        ('advgame.training.checkpoint', 'SB3Checkpoint')
 
     """
-    if (module, name) in _FORMER_NAMES:
-        return _FORMER_NAMES[module, name]
-    return _FORMER.get(module, module), name
+    old_module, old_name = _follow(module, name, _FORMER, _FORMER_NAMES)
+    return old_module, old_name or name
+
+
+def _follow(
+    module: str,
+    name: str | None,
+    modules: dict[str, str],
+    names: dict[tuple[str, str], tuple[str, str]],
+) -> tuple[str, str | None]:
+    """Follow a chain of moves (forward or back) from `module` and `name` to its end."""
+    for _ in range(len(MOVED) + len(MOVED_NAMES) + 1):  # a chain of moves, never a circle
+        if name is not None and (module, name) in names:
+            module, name = names[module, name]
+        elif module in modules:
+            module = modules[module]
+        else:
+            return module, name
+    raise RuntimeError(f"advgame.core.moved: the moves of {module!r} form a circle")
 
 
 class Unpickler(pickle.Unpickler):

@@ -75,7 +75,7 @@ class WhiteBox(Protocol):
 
     Every method takes a batch of *raw* observations as a float32 torch tensor ``[batch, obs]``
     and applies the policy's own frozen normalizer, so an attack works in the units the game
-    uses. Implemented by `advgame.agents.sb3_policy.SB3Policy` (and its recurrent subclass) and the MAPPO/IPPO actor policies.
+    uses. Implemented by `advgame.agents.common.sb3_policy.SB3Policy` (and its recurrent subclass) and the MAPPO/IPPO actor policies.
 
     Optionally a policy also has ``numpy_net(head)``: ``"mean"`` (`action_mean`) or ``"value"``
     (`value`, for a policy without a Q critic) as an `advgame.core.numpy_net.NumpyNet`, the same

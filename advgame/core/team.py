@@ -8,7 +8,7 @@ observation adversaries choose ``δ`` on the true state ``s_{t+1}``), so the obs
 are the (perturbed) ones the protagonists act on next, and `TeamView.state` is the true global
 state ``s_{t+1}`` a centralised critic may use.
 
-Multi-agent learners (`advgame.agents.marl`) train on it; with homogeneous agents it also runs
+Multi-agent learners (`advgame.agents.marl.marl`) train on it; with homogeneous agents it also runs
 under SuperSuit's padding and agents-as-envs vectorisation (one shared policy for the team).
 Under subprocess vectorisation, build views in the workers with `team_factory`.
 """

@@ -81,7 +81,7 @@ class SingleAgentView(gym.Env):
             self.compute_reward = goal_reward
             """The task's own goal reward ``(achieved_goal, desired_goal, info)`` (goal-conditioned
             tasks), what HER relabels with: true goals in, the task's true reward out. Which goals
-            HER passes is the replay buffer's choice; `advgame.agents.her`'s passes the true
+            HER passes is the replay buffer's choice; `advgame.agents.sb3.her`'s passes the true
             achieved goals the task put in ``info``, not the perturbed ones the protagonist saw."""
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:

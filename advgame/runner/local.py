@@ -1,7 +1,7 @@
 """The local back end of `advgame.runner.run.run_units`: this process or a process pool.
 
 The pool is kept warm across calls (until the process exits, or a call needs another size or
-import path), so what a job loads (SB3 models: `advgame.agents.checkpoint.load_model`
+import path), so what a job loads (SB3 models: `advgame.agents.common.checkpoint.load_model`
 caches them per process; a checkpoint rewritten in place is reloaded, see
 `advgame.runner.run`) serves the later jobs of the same worker. A worker that dies breaks a `ProcessPoolExecutor`; the units it and its
 fellows were running (each marks its start in a scratch folder) are charged one attempt, the

@@ -203,7 +203,7 @@ _MTIMES: dict[str, int] = {}
 def _forget_rewritten(unit: Any) -> None:
     """Drop this worker's cached models if a checkpoint the unit names changed on disk.
 
-    Warm workers keep loaded models (`advgame.agents.checkpoint.load_model`, cached by path)
+    Warm workers keep loaded models (`advgame.agents.common.checkpoint.load_model`, cached by path)
     across units and calls; a file rewritten at the same path must not be served stale.
     """
     changed = False
@@ -217,7 +217,7 @@ def _forget_rewritten(unit: Any) -> None:
         return value
 
     walk_files(unit, look)
-    checkpoint = sys.modules.get("advgame.agents.checkpoint")
+    checkpoint = sys.modules.get("advgame.agents.common.checkpoint")
     if changed and checkpoint is not None:
         log.info("a checkpoint changed on disk: reloading models in worker %d", os.getpid())
         checkpoint.load_model.cache_clear()

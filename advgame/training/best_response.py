@@ -1,7 +1,7 @@
 """Best-response training as a job: one learner against a fixed mixture of opponents.
 
 A `BestResponseJob` is a pure, picklable value; `train_best_response` trains its learner
-(`advgame.agents.side.Side`, an SB3 model on a `SingleAgentView`) against a
+(`advgame.agents.common.side.Side`, an SB3 model on a `SingleAgentView`) against a
 `MixtureSpec` of the other side's policies and returns the checkpoint *as bytes*, so the job
 can run on any worker of any node (`advgame.runner.run.run_units`) and the driver
 writes the files where the run keeps them. `advgame.workflows.psro` builds these jobs.
@@ -32,6 +32,7 @@ __all__ = [
     "MixturePolicy",
     "MixtureSpec",
     "best_response_side",
+    "split_n_envs",
     "train_best_response",
 ]
 
@@ -135,6 +136,20 @@ class BestResponseJob:
     """Train behind a `VecNormalize` (observations and rewards)."""
 
 
+def split_n_envs(hparams: Mapping[str, Any] | None, owner: str) -> tuple[int, dict[str, Any]]:
+    """``(n_envs, the learner config's overrides)`` from a best response's `hparams`.
+
+    ``n_envs`` (views trained on at once, default 1) is the job's, not the learner's; `owner`
+    names where the hparams come from in the error (an `OptimalSearch` grid checks its entries
+    with it before any job runs).
+    """
+    rest = dict(hparams or {})
+    n_envs = rest.pop("n_envs", 1)
+    if type(n_envs) is not int or n_envs < 1:
+        raise ConfigError(f"{owner}: n_envs must be an int >= 1, got {n_envs!r}.")
+    return n_envs, rest
+
+
 def _normalized_targets(job: BestResponseJob) -> list[str]:
     from advgame.core.registry import make
 
@@ -145,7 +160,7 @@ def _normalized_targets(job: BestResponseJob) -> list[str]:
 
 def _opponent_std(job: BestResponseJob) -> np.ndarray | None:
     """The std of the most likely opponent checkpoint's normalizer (None without one)."""
-    from advgame.agents.checkpoint import load_normalizer
+    from advgame.agents.common.checkpoint import load_normalizer
 
     for mix in job.opponents.values():
         spec = mix.specs[int(np.argmax(mix.weights))]
@@ -176,15 +191,12 @@ def best_response_side(
     """
     import torch
 
-    from advgame.agents.side import Side
+    from advgame.agents.common.side import Side
     from advgame.core.views import view_factory
     from advgame.training.config import learner_config
 
     torch.set_num_threads(1)
-    hparams = dict(job.hparams or {})
-    n_envs = hparams.pop("n_envs", 1)
-    if type(n_envs) is not int or n_envs < 1:
-        raise ConfigError(f"Best response {job.name}: n_envs must be an int >= 1, got {n_envs!r}.")
+    n_envs, hparams = split_n_envs(job.hparams, f"Best response {job.name}")
     learner = learner_config(job.algo, hparams)
     kwargs = {**job.make_kwargs, "phase": "train"}
     fns = [view_factory(job.scenario, job.agent, dict(job.opponents), **kwargs)] * n_envs

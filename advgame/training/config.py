@@ -22,8 +22,8 @@ from advgame.errors import ConfigError
 __all__ = ["METHODS", "PROTAGONISTS", "SAFE_ALGOS", "TEAM_ALGOS", "TrainConfig", "learner_config"]
 
 _LEARNERS = "advgame.agents.learners:LEARNERS"
-_TEAM_LEARNERS = "advgame.agents.marl:MARL_LEARNERS"
-_SAFE_LEARNERS = "advgame.agents.safe:SAFE_LEARNERS"
+_TEAM_LEARNERS = "advgame.agents.marl.marl:MARL_LEARNERS"
+_SAFE_LEARNERS = "advgame.agents.safe.safe:SAFE_LEARNERS"
 SAFE_ALGOS = ("ppo-lag", "ppo-pid", "crpo", "pcrpo")
 """Constrained protagonist learners (safe scenarios): PPO-Lagrangian, PID-Lagrangian, CRPO,
 PCRPO."""
@@ -112,13 +112,13 @@ normalized units), RARL (learned forces, trained at half the bound, tested at fu
 (nominal training with the state-adversarial regulariser, `advgame.agents.SAPPOConfig`),
 ATLA-SA (ATLA's alternation with an SA-PPO protagonist), ATLA-LSTM (ATLA's alternation with an
 LSTM protagonist, `advgame.agents.RecurrentPPOConfig`), ATLA-LSTM-SA (the same with
-SA-PPO's regulariser on the LSTM protagonist, `advgame.agents.sa_recurrent`; both pair it with
+SA-PPO's regulariser on the LSTM protagonist, `advgame.agents.sa.recurrent`; both pair it with
 an LSTM adversary, as ATLA does), PGD-AT (adversarial training on the
 current policy: a MAD attack on the learner itself during every rollout), SAC and OMPO on raw observations and rewards, as OMPO's authors train (occupancy
-matching under shifting dynamics, `advgame.agents.ompo`; ``--preset ompo-nonstationary`` gives
+matching under shifting dynamics, `advgame.agents.ompo.ompo`; ``--preset ompo-nonstationary`` gives
 its shifting tasks), DBC on raw observations and rewards as its authors train (a bisimulation
-encoder on SB3's SAC, `advgame.agents.dbc`), RSC likewise (SAC on real transitions mixed with
-augmented ones from a causal world model, `advgame.agents.rsc`), and the constrained learners on a
+encoder on SB3's SAC, `advgame.agents.dbc.dbc`), RSC likewise (SAC on real transitions mixed with
+augmented ones from a causal world model, `advgame.agents.rsc.rsc`), and the constrained learners on a
 safe scenario (``--preset`` picks the in-training disruption)."""
 
 

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from advgame.agents.side import Side
-from advgame.agents.stats import EpisodeStats
+from advgame.agents.common.side import Side
+from advgame.agents.common.stats import EpisodeStats
 from advgame.core.config import write_atomic
 from advgame.core.episodes import filler_action, rollout
 from advgame.core.files import read_csv, read_json, reading, require

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from advgame.agents.stats import EpisodeStats
+from advgame.agents.common.stats import EpisodeStats
 from advgame.core.registry import make
 from advgame.errors import ConfigError
 from advgame.training.config import PROTAGONISTS, TEAM_ALGOS, TrainConfig

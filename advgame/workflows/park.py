@@ -11,7 +11,7 @@ is kept (an OMPO run is seven core-hours) would then start over after every inte
 the run's ``config.json``, ``state.json``, ``population.json`` and ``progress.csv``; its last
 checkpoint folder (and, where the run samples older opponents, every folder its population
 names), without replay buffers; each replay buffer as append-only chunks of its filled rows
-(`advgame.agents.replay_store`), so parking the run again later adds only what it learned
+(`advgame.agents.common.replay_store`), so parking the run again later adds only what it learned
 since. `unpark_run` rebuilds ``runs/RUN`` from it; `advgame.workflows.campaign.run_campaign`
 does that by itself for every run whose parked copy is further on than ``runs/`` holds, and
 deletes the parked copy once the run is finished (``finished/`` holds it then).
@@ -107,7 +107,7 @@ def park_run(run: Path, parked: Path, attempts: int = 3) -> int:
 def _park(run: Path, parked: Path) -> int:
     from stable_baselines3.common.save_util import load_from_pkl
 
-    from advgame.agents.replay_store import store_buffer
+    from advgame.agents.common.replay_store import store_buffer
     from advgame.training.population import Population
 
     if not (run / "state.json").is_file():
@@ -159,7 +159,7 @@ def unpark_run(parked: Path, run: Path) -> int:
     """
     from stable_baselines3.common.save_util import save_to_pkl
 
-    from advgame.agents.replay_store import load_buffer
+    from advgame.agents.common.replay_store import load_buffer
 
     parked, run = Path(parked), Path(run)
     iteration = parked_iteration(parked)

@@ -44,6 +44,11 @@ __all__ = ["PSROConfig", "load_meta", "resume_psro", "run_psro"]
 
 log = logging.getLogger(__name__)
 PROTAGONIST = "protagonist"
+_META = {
+    "protagonist": ("protagonists", "protagonist_strategy"),
+    "adversary": ("adversaries", "adversary_strategy"),
+}
+"""A side's keys in a meta-game entry (``meta.json``): its members' ids and their strategy."""
 
 
 @dataclass(frozen=True)
@@ -299,23 +304,24 @@ class _PSRO:
         return MixtureSpec(specs, tuple(w / total for _, w in keep), self.cfg.seed + it)
 
     def _job(self, side: str, it: int) -> BestResponseJob:
-        """The best response of `side` at iteration `it`, against the last meta-strategy."""
+        """The best response of `side` at iteration `it`, against the last meta-strategy.
+
+        Its opponents: the other side's members in the last meta-game, drawn by their
+        meta-strategy (before the first meta-game, every member alike).
+        """
         cfg = self.cfg
         last = self.meta[-1] if self.meta else None
         if side == PROTAGONIST:
-            advs = self._listed(last["adversaries"] if last else None, self.adversary)
-            weights = last["adversary_strategy"] if last else [1.0 / len(advs)] * len(advs)
-            opponents = {self.adversary: self._mixture(advs, weights, it)}
-            algo, hparams, steps = (
-                cfg.protagonist_algo,
-                cfg.protagonist_hparams,
-                cfg.protagonist_steps,
-            )
-        else:
-            assert last is not None  # adversaries respond from iteration 1 on
-            prots = self._listed(last["protagonists"], PROTAGONIST)
-            opponents = {PROTAGONIST: self._mixture(prots, last["protagonist_strategy"], it)}
-            algo, hparams, steps = cfg.adversary_algo, cfg.adversary_hparams, cfg.adversary_steps
+            role, other_role, other = "protagonist", "adversary", self.adversary
+        else:  # adversaries respond from iteration 1 on
+            role, other_role, other = "adversary", "protagonist", PROTAGONIST
+        ids, strategy = _META[other_role]
+        members = self._listed(last[ids] if last else None, other)
+        weights = last[strategy] if last else [1.0 / len(members)] * len(members)
+        opponents = {other: self._mixture(members, weights, it)}
+        algo, hparams, steps = (
+            getattr(cfg, f"{role}_{key}") for key in ("algo", "hparams", "steps")
+        )
         return BestResponseJob(name=f"{side}@{it}", scenario=cfg.scenario,
                                make_kwargs=cfg.make_kwargs(), agent=side, algo=algo,
                                hparams=hparams, opponents=opponents, steps=steps,
@@ -329,7 +335,7 @@ class _PSRO:
 
     def _add_member(self, job: BestResponseJob, result: dict[str, Any], it: int) -> None:
         """Write a best response's files under ``checkpoints/<id>/``; add it as a member."""
-        from advgame.agents.checkpoint import SB3Checkpoint
+        from advgame.agents.common.checkpoint import SB3Checkpoint
 
         folder = self.dir / "checkpoints" / job.name.replace("@", "_")
         folder.mkdir(parents=True, exist_ok=True)

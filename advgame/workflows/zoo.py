@@ -170,7 +170,7 @@ def load(entry_id: str, root: str | Path | None = None, *, adversary: bool = Fal
     `advgame.evaluation.run_protagonist` gives it. The files are checked against the
     manifest's sha256 first.
     """
-    from advgame.agents.checkpoint import SB3Checkpoint, saved_recurrent
+    from advgame.agents.common.checkpoint import SB3Checkpoint, saved_recurrent
     from advgame.training import TEAM_ALGOS
 
     base = Path(root) if root is not None else default_root()

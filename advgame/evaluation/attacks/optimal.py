@@ -25,6 +25,7 @@ import numpy as np
 from advgame.errors import ConfigError
 from advgame.evaluation.table.jobs import EvalJob
 from advgame.evaluation.table.payoff import NOMINAL, PayoffTable
+from advgame.training.best_response import split_n_envs
 
 __all__ = [
     "OPTIMAL",
@@ -122,12 +123,13 @@ class OptimalSearch:
         if not self.grid or not all(isinstance(g, Mapping) for g in self.grid):
             raise ConfigError(f"OptimalSearch.grid must be PPO override dicts, got {self.grid!r}.")
         for g in self.grid:
-            for key in ("n_envs", "steps_scale"):
-                value = g.get(key, 1)
-                if type(value) is not int or value < 1:
-                    raise ConfigError(
-                        f"OptimalSearch.grid entry {dict(g)!r}: {key} must be an int >= 1."
-                    )
+            split_n_envs(g, f"OptimalSearch.grid entry {dict(g)!r}")  # as the job reads it
+            scale = g.get("steps_scale", 1)
+            if type(scale) is not int or scale < 1:
+                raise ConfigError(
+                    f"OptimalSearch.grid entry {dict(g)!r}: steps_scale must be an int >= 1, "
+                    f"got {scale!r}."
+                )
             for key, allowed in (("algo", _ALGOS), ("victims", _VICTIMS)):
                 if g.get(key, allowed[0]) not in allowed:
                     raise ConfigError(
@@ -212,19 +214,19 @@ def released_jobs(
         raise ConfigError(
             f"No adversary for {missing} in the {OPTIMAL!r} column; every row plays its own."
         )
+    where = (scenario, threat, agent, protagonists)
     return [
-        EvalJob(
-            scenario=scenario,
-            make_kwargs={"preset": threat},
-            protagonist=name,
-            protagonist_spec=protagonists[name],
-            adversary=OPTIMAL,
-            adversary_specs={agent: adversaries[name]},
-            seeds=tuple(seeds),
-            episodes=episodes,
-        )
+        _attack_job(*where, name, OPTIMAL, adversaries[name], seeds, episodes)
         for name in protagonists
     ]
+
+
+def _attack_job(scenario: str, threat: str, agent: str, protagonists: Mapping[str, Any], name: str,
+                column: str, adversary: Any, seeds: Sequence[int], episodes: int = 1) -> EvalJob:  # fmt: skip
+    """Protagonist `name` against the learned `adversary` of `agent` (a candidate or the kept one)."""
+    return EvalJob(scenario=scenario, make_kwargs={"preset": threat}, protagonist=name,
+                   protagonist_spec=protagonists[name], adversary=column,
+                   adversary_specs={agent: adversary}, seeds=tuple(seeds), episodes=episodes)  # fmt: skip
 
 
 def candidate_jobs(
@@ -273,7 +275,7 @@ def _search(
     progress: bool = False,
 ) -> dict[str, _Found]:
     """Train every candidate as executor jobs, write their files, keep each row's strongest."""
-    from advgame.agents.checkpoint import SB3Checkpoint
+    from advgame.agents.common.checkpoint import SB3Checkpoint
     from advgame.core.progress import listening
     from advgame.evaluation.table.running import _DEFAULT_EXECUTOR, evaluate
     from advgame.runner.run import run_units
@@ -306,11 +308,10 @@ def _search(
         )
     select = tuple(range(10_000, 10_000 + search.select_seeds))  # apart from the table's seeds
     jobs = [
-        EvalJob(scenario=scenario, make_kwargs={"preset": threat}, protagonist=name,
-                protagonist_spec=protagonists[name], adversary=f"candidate {k}",
-                adversary_specs={agent: c}, seeds=select)
-        for name, ks in by_index.items() for k, c in sorted(ks.items())
-    ]  # fmt: skip
+        _attack_job(scenario, threat, agent, protagonists, name, f"candidate {k}", c, select)
+        for name, ks in by_index.items()
+        for k, c in sorted(ks.items())
+    ]
     # kept as part files: a rerun reads the selection back (seconds rather than every
     # candidate's episodes again) and keeps the same candidate, whatever its workers
     table = evaluate(jobs, progress=False, results_dir=out / "optimal" / SELECTION)

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from advgame.agents.checkpoint import ALGOS, SB3Checkpoint
+from advgame.agents.common.checkpoint import ALGOS, SB3Checkpoint
 from advgame.errors import AdvgameError, ConfigError, did_you_mean
 
 __all__ = [
@@ -28,7 +28,7 @@ __all__ = [
     "team_protagonist",
 ]
 
-ACTOR_SPEC = "advgame.agents.marl_nets:TorchActorCheckpoint"
+ACTOR_SPEC = "advgame.agents.marl.nets:TorchActorCheckpoint"
 """The spec class of one protagonist's actor in a MAPPO/IPPO actors file."""
 NORMALIZER_NAMES = ("vecnormalize.pkl", "vec_normalize.pkl", "protagonist_vecnormalize.pkl")
 """Files beside a model that an error about a missing normalizer suggests."""
@@ -95,7 +95,7 @@ def sb3_protagonist(
             f"observations.{hint}"
         )
     if normalizer is not None:
-        from advgame.agents.checkpoint import load_normalizer
+        from advgame.agents.common.checkpoint import load_normalizer
 
         load_normalizer(str(normalizer))  # a missing or unreadable file fails here
     norm = None if normalizer is None else str(normalizer)

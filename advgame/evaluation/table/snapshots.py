@@ -31,7 +31,7 @@ def adversary_shapes(scenario: str, preset: str) -> dict[str, tuple[int, ...]]:
 
 def misfit(scenario: str, preset: str, specs: Mapping[str, Any]) -> str:
     """Why `specs` cannot act in `preset` of `scenario` ('' if they can)."""
-    from advgame.agents.checkpoint import SB3Checkpoint, load_model
+    from advgame.agents.common.checkpoint import SB3Checkpoint, load_model
 
     shapes = adversary_shapes(scenario, preset)
     for agent, spec in specs.items():
