@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 _LAZY = {"FixedInfos": "advgame.interop.infos"}
 
-__all__ = sorted(_LAZY)
+__all__ = ["FixedInfos"]
 
 if TYPE_CHECKING:
     from advgame.interop.infos import FixedInfos
