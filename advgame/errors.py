@@ -14,6 +14,7 @@ __all__ = [
     "MissingExtraError",
     "UnknownNameError",
     "UnknownScenarioError",
+    "UnsupportedError",
     "did_you_mean",
 ]
 
@@ -64,6 +65,14 @@ class MissingExtraError(AdvgameError, ImportError):
 
 class ActionError(AdvgameError, ValueError):
     """An action dict passed to `Game.step` is missing agents, names unknown ones, or is malformed."""
+
+
+class UnsupportedError(AdvgameError, NotImplementedError):
+    """A client asked a game for something it does not have (a render on a state-only task).
+
+    The message names the scenario and what it offers instead. A subclass of
+    `NotImplementedError`, as Gymnasium's and PettingZoo's base ``render`` raise.
+    """
 
 
 def did_you_mean(name: str, choices: Iterable[str]) -> str:

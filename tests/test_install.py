@@ -32,6 +32,8 @@ EXTRAS = {
     "robosuite",
     "llm",
     "ray",
+    "supersuit",
+    "torchrl",
     "test",
     "all",
     "bench",

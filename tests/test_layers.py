@@ -25,7 +25,13 @@ FOLDERS = {"advgame": "advgame", "agents": "advgame.agents", "adversaries": "adv
 LAYERS = [
     ("advgame.errors",),
     ("advgame.core",),
-    ("advgame.disruptors", "advgame.agents", "advgame.adversaries", "advgame.scenarios"),
+    (
+        "advgame.disruptors",
+        "advgame.agents",
+        "advgame.adversaries",
+        "advgame.scenarios",
+        "advgame.interop",
+    ),
     ("advgame.training",),
     ("advgame.runner",),
     ("advgame.evaluation",),

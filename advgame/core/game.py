@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -46,7 +46,7 @@ from advgame.core.moving import Moves
 from advgame.core.policy import AgentInfo
 from advgame.core.schedule import PHASES, Schedule
 from advgame.core.task import TaskBase
-from advgame.errors import ActionError, ConfigError, did_you_mean
+from advgame.errors import ActionError, ConfigError, UnsupportedError, did_you_mean
 
 __all__ = ["Game", "Move"]
 
@@ -68,12 +68,6 @@ class Game(Moves, ParallelEnv):
 
     """
 
-    metadata: ClassVar[dict[str, Any]] = {
-        "name": "advgame_v0",
-        "is_parallelizable": True,
-        "render_modes": ["rgb_array", "human"],
-    }
-
     def __init__(
         self,
         task: TaskBase,
@@ -85,6 +79,14 @@ class Game(Moves, ParallelEnv):
     ) -> None:
         self.task = task
         self.scenario_id = scenario_id
+        self.metadata: dict[str, Any] = {
+            "name": "advgame_v0",
+            "is_parallelizable": True,
+            "render_modes": _render_modes(task),
+        }
+        """PettingZoo's metadata; ``render_modes`` are the task base's own (none: state-only)."""
+        self.render_mode: str | None = getattr(getattr(task, "env", None), "render_mode", None)
+        """The task base's render mode (``make(..., render_mode=...)``); None: `render` refuses."""
         self.preset: Any = None
         """The `Preset` the game was made from, if any (set by `advgame.make`)."""
         if not np.isfinite(cost_weight) or cost_weight < 0:
@@ -118,6 +120,8 @@ class Game(Moves, ParallelEnv):
             **task.action_spaces,
             **{a: d.action_space for a, d in self.disruptors.items()},
         }
+        self.observation_spaces = {a: self._obs_spaces[a] for a in self.possible_agents}
+        self.action_spaces = {a: self._act_spaces[a] for a in self.possible_agents}
         self._p_spaces: dict[str, tuple[spaces.Space, tuple[int, ...] | None]] = {}
         for p in self.protagonists:  # in protagonist order; shape None: a Discrete action
             s = task.action_spaces[p]
@@ -287,7 +291,23 @@ class Game(Moves, ParallelEnv):
         return self._true_obs[agent]
 
     def render(self) -> Any:
-        """Render the task base."""
+        """Render the task base, as the game's `render_mode` says.
+
+        Raises:
+            UnsupportedError: the game was made without a render mode, or its task base has
+                none (a state-only task); the message names the scenario and the fix.
+
+        """
+        if self.render_mode is None:
+            name = self.scenario_id or type(self.task).__name__
+            modes = self.metadata["render_modes"]
+            fix = (
+                f"make it with advgame.make({name!r}, render_mode=...), one of {modes}"
+                if modes
+                else "its task base offers no render modes (a state-only task); "
+                "observations are its only output"
+            )
+            raise UnsupportedError(f"{name} cannot render: {fix}.")
         return self.task.render()
 
     def close(self) -> None:
@@ -310,3 +330,10 @@ class Game(Moves, ParallelEnv):
             f"Game({self.scenario_id or type(self.task).__name__!r}, protagonists="
             f"{list(self.protagonists)}, adversaries={list(self.adversaries)}, phase={self.phase!r})"
         )
+
+
+def _render_modes(task: TaskBase) -> list[str]:
+    """The render modes the task base's simulator lists (none when it lists none)."""
+    metadata = getattr(getattr(task, "env", None), "metadata", None)
+    modes = metadata.get("render_modes") if isinstance(metadata, Mapping) else None
+    return [str(m) for m in modes] if isinstance(modes, (list, tuple)) else []

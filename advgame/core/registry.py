@@ -23,6 +23,7 @@ from advgame.errors import (
     MissingExtraError,
     UnknownNameError,
     UnknownScenarioError,
+    UnsupportedError,
     did_you_mean,
 )
 
@@ -186,9 +187,14 @@ def _gym_keywords(env_id: str) -> set[str]:
     return _parameters(gymnasium.make) | _parameters(GymTask) | _parameters(env)
 
 
-def _task_error(spec: ScenarioSpec, kwargs: Mapping[str, Any], exc: Exception) -> ConfigError:
+def _task_error(spec: ScenarioSpec, kwargs: Mapping[str, Any], exc: Exception) -> AdvgameError:
     known = spec.task_keywords()
     match = re.search(r"unexpected keyword argument '(\w+)'", str(exc))
+    if match and match.group(1) == "render_mode":
+        return UnsupportedError(
+            f"make({spec.id!r}, render_mode={kwargs['render_mode']!r}): {spec.id} cannot "
+            "render; its task base offers no render modes (a state-only task). Drop render_mode."
+        )
     if match:
         bad = match.group(1)
         return UnknownNameError(

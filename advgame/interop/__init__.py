@@ -1,0 +1,27 @@
+"""Adapters that let the ecosystem's multi-agent clients read an advgame game (docs/interop.md).
+
+Most clients take a `Game` as it is (it is a PettingZoo ``ParallelEnv``); these adapters cover
+what some of them cannot read on their own.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+_LAZY = {"FixedInfos": "advgame.interop.infos"}
+
+__all__ = ["FixedInfos"]
+
+if TYPE_CHECKING:
+    from advgame.interop.infos import FixedInfos
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_LAZY])
