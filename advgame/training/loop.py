@@ -23,6 +23,7 @@ from advgame.core.progress import progress
 from advgame.core.registry import load, make
 from advgame.core.views import view_factory
 from advgame.errors import FileFormatError
+from advgame.training.conditions import play_conditions, training_schedule
 from advgame.training.config import PROTAGONISTS, learner_config
 from advgame.training.population import ZERO, Member, Population
 from advgame.training.trainer import Trainer
@@ -148,13 +149,17 @@ class Run:
     def _quick_eval(self, protagonists: dict[str, Any], it: int) -> dict[str, float]:
         """Mean true return of the deterministic protagonists, nominal and attacked (full budget).
 
-        Episode i plays episode ``1 + i`` of any scheduled adversary (a shift that varies per
+        With `TrainConfig.eval_conditions`, in each of those instead
+        (`advgame.training.conditions`). Episode i plays episode ``1 + i`` of any scheduled adversary (a shift that varies per
         episode, `advgame.evaluation.schedule_index`'s convention), the same ones every
         iteration, so the attacked curve is comparable across iterations.
         """
         if not self.cfg.eval_episodes:
             return {}
         t = self.t
+        if self.cfg.eval_conditions:  # the paper's protocol: named conditions instead
+            schedule = training_schedule(t.sides[PROTAGONISTS])
+            return play_conditions(t, protagonists, schedule)
         game = make(self.cfg.scenario, **self.cfg.game_options(), phase="eval")
         seed = self.cfg.seed + 100_000 + it
         episodes = {"seed": seed, "episodes": self.cfg.eval_episodes, "first_index": 1}

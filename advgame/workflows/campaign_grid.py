@@ -197,7 +197,13 @@ class Campaign:
         own = {
             k: v for k, v in self.per_method.get(method, {}).items() if k not in ("method", "seeds")
         }
-        fields = {**METHODS[self.base_method(method)], **self.train, **own}
+        base = METHODS[self.base_method(method)]
+        fields = {**base, **self.train, **own}
+        hparams = [d.get("protagonist_hparams") for d in (base, self.train, own)]
+        if sum(h is not None for h in hparams) > 1 and all(
+            isinstance(h, Mapping) for h in hparams if h is not None
+        ):  # a method's own settings (a matched control's) stay under the campaign's overrides
+            fields["protagonist_hparams"] = {k: v for h in hparams if h for k, v in h.items()}
         try:
             return TrainConfig(scenario=self.scenario, seed=int(seed), **fields)
         except TypeError as exc:
