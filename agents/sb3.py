@@ -412,6 +412,8 @@ class TD3Config(_OffPolicyConfig):
 @functools.cache
 def _matched_sac_class() -> Any:
     """`MatchedSAC`, built on first use so that importing the configs does not import SB3."""
+    import warnings
+
     import torch as th
     from stable_baselines3 import SAC
     from stable_baselines3.common.utils import update_learning_rate
@@ -432,6 +434,12 @@ def _matched_sac_class() -> Any:
             self.critic_learning_rate = critic_learning_rate
             self.actor_update_interval = actor_update_interval
             super().__init__(policy, env, _init_setup_model=_init_setup_model, **kwargs)
+
+        def _setup_model(self) -> None:
+            with warnings.catch_warnings():
+                if "n_steps" in self.replay_buffer_kwargs:  # a loaded model's n-step buffer
+                    warnings.filterwarnings("ignore", message="`n_steps=", category=UserWarning)
+                super()._setup_model()
 
         def _update_learning_rate(self, optimizers: Any) -> None:
             super()._update_learning_rate(optimizers)
