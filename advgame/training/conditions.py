@@ -83,40 +83,49 @@ def check_conditions(conditions: Any, episodes: int) -> None:
 
 
 def play_conditions(
-    trainer: Any, protagonists: Mapping[str, Any], schedule: Mapping[str, int]
+    trainer: Any,
+    protagonists: Mapping[str, Any],
+    schedule: Mapping[str, int],
+    games: dict[str, Any],
 ) -> dict[str, float]:
     """Each condition's mean true return of the deterministic `protagonists` (one point).
 
     `trainer` gives the run's config, fixed and learned adversaries; `schedule` is where the
     protagonist's training views' per-episode schedules are now (`advgame.core.episodes.
-    schedule_positions`), for the ``training`` condition.
+    schedule_positions`), for the ``training`` condition. `games` keeps each condition's game
+    from one point to the next (a robosuite task takes seconds to build); the caller closes
+    them.
     """
     import time
-
-    from advgame.core.registry import make
 
     cfg, start = trainer.cfg, time.perf_counter()
     row: dict[str, float] = {}
     for spec in cfg.eval_conditions:
+        if spec not in games:
+            games[spec] = _game(cfg, spec)
+        game = games[spec]
         if spec == TRAINING:
-            game = make(cfg.scenario, **cfg.game_options(), phase="eval")
             latest = {a: trainer.latest.get(a, trainer.population.of(a)[-1].spec)
                       for a in trainer.learned}  # fmt: skip
             others: dict[str, Any] = {**trainer.fixed, **latest}
             index = max(schedule.values()) if schedule else 1
             indices = [index] * cfg.eval_episodes
         else:
-            game = make(cfg.scenario, preset=condition_name(spec), phase="eval",
-                        **(cfg.task_options or {}))  # fmt: skip
             others = dict(game.preset.adversaries) if game.preset is not None else {}
             indices = list(range(1, cfg.eval_episodes + 1))
-        try:
-            returns = _play(game, {**protagonists, **others}, cfg.seed + SEED_OFFSET, indices)
-        finally:
-            game.close()
+        returns = _play(game, {**protagonists, **others}, cfg.seed + SEED_OFFSET, indices)
         row[condition_column(spec)] = float(np.mean(returns))
     row["eval_wall_s"] = time.perf_counter() - start
     return row
+
+
+def _game(cfg: Any, spec: str) -> Any:
+    """The game of condition `spec` for the run of `cfg` (evaluation phase, full budgets)."""
+    from advgame.core.registry import make
+
+    if spec == TRAINING:
+        return make(cfg.scenario, **cfg.game_options(), phase="eval")
+    return make(cfg.scenario, preset=condition_name(spec), phase="eval", **(cfg.task_options or {}))
 
 
 def _play(game: Any, policies: Mapping[str, Any], seed: int, indices: Sequence[int]) -> list[float]:

@@ -44,6 +44,7 @@ class Run:
         self.dir = trainer.dir
         self.ckpt = self.dir / "checkpoints"
         self.prot_cfg = learner_config(self.cfg.protagonist_algo, self.cfg.protagonist_hparams)
+        self.eval_games: dict[str, Any] = {}  # the in-training evaluation's, kept (conditions)
         self.adv_cfg = learner_config(self.cfg.adversary_algo, self.cfg.adversary_hparams)
         _warn_rollouts("protagonist", self.cfg.protagonist_steps, self.prot_cfg, self.cfg.n_envs)
         if self.t.learned:  # PPO-style runs train no adversary
@@ -86,8 +87,8 @@ class Run:
             bar.close()
             if writer:
                 writer.close()
-            for side in self.t.sides.values():
-                side.close()
+            for opened in [*self.t.sides.values(), *self.eval_games.values()]:
+                opened.close()
         return self.dir
 
     # -- one iteration ----------------------------------------------------------------------
@@ -158,8 +159,8 @@ class Run:
             return {}
         t = self.t
         if self.cfg.eval_conditions:  # the paper's protocol: named conditions instead
-            schedule = training_schedule(t.sides[PROTAGONISTS])
-            return play_conditions(t, protagonists, schedule)
+            where = training_schedule(t.sides[PROTAGONISTS])
+            return play_conditions(t, protagonists, where, self.eval_games)
         game = make(self.cfg.scenario, **self.cfg.game_options(), phase="eval")
         seed = self.cfg.seed + 100_000 + it
         episodes = {"seed": seed, "episodes": self.cfg.eval_episodes, "first_index": 1}

@@ -208,13 +208,20 @@ def evaluation_curves(campaign: Campaign, out: Path) -> Path | None:
 
     specs = [c for r in campaign.runs() for c in campaign.config(r).eval_conditions or ()]
     columns = [condition_column(c) for c in dict.fromkeys(specs)]
-    files = progress_files(campaign, out)
+    files = {r: f for r, f in progress_files(campaign, out).items() if _has(f, columns)}
     if not columns or not files:
         return None
     title = f"{campaign.scenario}: deterministic evaluation during training ({out.name})"
     return method_curves(
         campaign, files, out / EVALUATION_CURVES, ragged=True, title=title, columns=columns
     )
+
+
+def _has(path: Path, columns: Sequence[str]) -> bool:
+    """Whether the CSV at `path` has every one of `columns` (its header says)."""
+    with path.open() as f:
+        header = f.readline().strip().split(",")
+    return all(c in header for c in columns)
 
 
 RATE_ITERATIONS = 3
