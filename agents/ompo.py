@@ -14,10 +14,9 @@ tuning, replay buffer, save/load, logging and callbacks stay SB3's):
   ``λ (‖∇D(x̂)‖ − 1)²`` on random interpolations ``x̂``. Its logit estimates
   ``log ρ_local / ρ_global``.
 * **Reward**: ``r' = max(r + reward_max, 1e-6) − w · logit D(s, a, s')``, ``w`` the
-  `correction_weight` (None: `tomac_alpha`, as the authors'; 0 turns the correction off for
-  an ablation, the initial-state terms keep `tomac_alpha`). Each training call logs the
-  correction's size: ``train/logit_abs`` (mean ``|logit|``), ``train/correction_abs``
-  (``w ·`` that) and ``train/correction_ratio`` (that over the mean shifted reward).
+  `correction_weight` (None: `tomac_alpha`, the authors'; 0: none, the initial-state terms keep
+  `tomac_alpha`). Each training call logs ``train/logit_abs`` (mean ``|logit|``),
+  ``train/correction_abs`` (``w ·`` that) and ``train/correction_ratio`` (over the shifted reward).
 * **Critic** (every update): for each critic k, the target
   ``y_k = r' + γ (1 − d) [mix · Q_k(s', a') + (1 − mix) · min_j Q̄_j(s', a') − α log π(a'|s')]``
   (``a' ~ π(s')``, `critic_mix` 0.05 of the online critic) and the loss
@@ -187,8 +186,7 @@ class OMPO(SAC):
         self.reward_max, self.critic_mix = reward_max, critic_mix
         self.correction_weight = correction_weight
         self.sizes: list[tuple[th.Tensor, th.Tensor]] = []
-        """Mean ``|logit|`` and mean shifted reward of each batch `shaped_reward` saw since
-        the last log (`train` logs their means)."""
+        """Mean ``|logit|`` and shifted reward of each batch `shaped_reward` saw; `train` logs."""
         self.since_discriminator = 0
         """Transitions added since the discriminator last trained."""
         self.counts = {"critic": 0, "actor": 0, "target": 0, "discriminator": 0}
@@ -257,7 +255,7 @@ class OMPO(SAC):
     @property
     def weight(self) -> float:
         """The reward correction's weight: `correction_weight`, or `tomac_alpha` when None."""
-        w = getattr(self, "correction_weight", None)  # None in models saved before it existed
+        w = self.correction_weight  # (None in models saved before it existed: __init__ sets it)
         return self.tomac_alpha if w is None else float(w)
 
     def shaped_reward(self, data: Any) -> th.Tensor:
@@ -367,7 +365,7 @@ class OMPO(SAC):
 
     def _record_correction(self) -> None:
         """Log the mean correction size of this call's critic batches, and its share."""
-        if not self.sizes:
+        if not self.sizes:  # no update in this call
             return
         logit, reward = (float(th.stack(x).mean()) for x in zip(*self.sizes, strict=True))
         self.sizes = []

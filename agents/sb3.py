@@ -6,10 +6,10 @@ single-agent views. The same configs train adversaries (PPO, SAC) in the adversa
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from advgame.core.registry import load
 from advgame.errors import ConfigError
 
 __all__ = [
@@ -268,19 +268,20 @@ class _OffPolicyConfig(_SB3Config):
         }
 
 
+_GOALS = ("future", "final", "episode")
+"""HER's goal selection strategies."""
+
+
 @dataclass(frozen=True)
 class SACConfig(_OffPolicyConfig):
     """SAC with the paper's table (fixed temperature α = 0.2, [64, 64], lr 1e-3, batch 64).
 
-    The last four fields let SAC share another method's step sizes, temperature, returns,
-    update schedule and networks (the ``sac-<method>-matched`` controls,
-    `advgame.training.METHODS`); their defaults are SB3's SAC.
+    Its last four fields let it learn as another method does: the ``sac-*-matched`` controls.
     """
 
     algo: ClassVar[str] = "sac"
     ent_coef: float | str = 0.2
-    """Entropy temperature α: a number (fixed; the paper's auto alpha is False) or SB3's
-    ``"auto"`` / ``"auto_<initial>"`` (tuned at `learning_rate`)."""
+    """Entropy temperature α: fixed (the paper's auto alpha is False) or ``"auto_<initial>"``."""
     train_freq: int = 1
     """Environment steps between updates."""
     gradient_steps: int = 1
@@ -298,54 +299,44 @@ class SACConfig(_OffPolicyConfig):
     n_steps: int = 1
     """Steps of the critic's returns (SB3's n-step replay buffer; 1: one-step)."""
     actor_update_interval: int = 1
-    """Updates between two updates of the actor, the temperature and the targets (the critics
-    learn at every one): OMPO's and DBC's schedule is 2."""
+    """Updates between two of the actor, temperature and targets (OMPO's and DBC's: 2)."""
     networks: str = "sb3"
-    """``"sb3"`` (SB3's ReLU MLPs) or ``"ompo"`` (OMPO's LayerNorm + tanh first layer, then ELU:
-    `advgame.agents.ompo_nets.OMPOPolicy`) for the actor and the critics."""
+    """``"sb3"`` (ReLU MLPs) or ``"ompo"`` (OMPO's: `advgame.agents.ompo_nets.OMPOPolicy`)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.her_goal_selection not in ("future", "final", "episode"):
-            raise ConfigError(
-                "SACConfig.her_goal_selection must be 'future', 'final' or 'episode', got "
-                f"{self.her_goal_selection!r}."
-            )
-        if self.her_n_sampled_goal < 1:
-            raise ConfigError(
-                f"SACConfig.her_n_sampled_goal must be >= 1, got {self.her_n_sampled_goal!r}."
-            )
-        self._check_ints(("n_steps", "actor_update_interval", "train_freq", "gradient_steps"), 1)
-        alpha = self.ent_coef
+        alpha, rate = self.ent_coef, self.critic_learning_rate
         auto = isinstance(alpha, str) and (alpha == "auto" or alpha.startswith("auto_"))
-        if not (auto or (isinstance(alpha, (int, float)) and not isinstance(alpha, bool))):
-            raise ConfigError(
-                f"SACConfig.ent_coef must be a number or 'auto' / 'auto_<initial>' (e.g. "
-                f"'auto_0.1'), got {alpha!r}."
-            )
-        rate = self.critic_learning_rate
-        if rate is not None and not (isinstance(rate, (int, float)) and rate > 0):
-            raise ConfigError(f"SACConfig.critic_learning_rate must be > 0 or None, got {rate!r}.")
-        if self.networks not in ("sb3", "ompo"):
-            raise ConfigError(f"SACConfig.networks must be 'sb3' or 'ompo', got {self.networks!r}.")
-        if self.her and (self.n_steps > 1 or self.networks != "sb3"):
-            raise ConfigError("SACConfig(her=True) takes n_steps = 1 and networks = 'sb3' only.")
+        number = isinstance(alpha, (int, float)) and not isinstance(alpha, bool)
+        plain = self.n_steps == 1 and self.networks == "sb3"
+        checks = {
+            "her_goal_selection": (self.her_goal_selection in _GOALS, f"one of {_GOALS}"),
+            "her_n_sampled_goal": (self.her_n_sampled_goal >= 1, ">= 1"),
+            "ent_coef": (auto or number, "a number or 'auto_<initial>' (e.g. 'auto_0.1')"),
+            "critic_learning_rate": (rate is None or rate > 0, "> 0 or None"),
+            "networks": (self.networks in ("sb3", "ompo"), "'sb3' or 'ompo'"),
+            "her": (plain or not self.her, "False with n_steps > 1 or networks 'ompo'"),
+        }
+        for name, (ok, expected) in checks.items():
+            if not ok:
+                value = getattr(self, name)
+                raise ConfigError(f"SACConfig.{name} must be {expected}, got {value!r}.")
+        self._check_ints(("n_steps", "actor_update_interval", "train_freq", "gradient_steps"), 1)
 
     @staticmethod
     def model_class() -> Any:
-        """The SB3 class that trains (and resumes) it: `MatchedSAC` (SB3's SAC by default)."""
-        return _matched_sac_class()
+        """The SB3 class that trains (and resumes) it: `advgame.agents.sac_matched.MatchedSAC`."""
+        from advgame.agents.sac_matched import MatchedSAC
+
+        return MatchedSAC
 
     def make_model(
         self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
     ) -> Any:
         """Build a `MatchedSAC` on `env` (``MultiInputPolicy`` on Dict observations)."""
-        policy: Any = self.policy(env)
-        if self.networks == "ompo":
-            from advgame.agents.ompo_nets import OMPOPolicy
-
-            policy = OMPOPolicy
-        return _matched_sac_class()(
+        ompo = self.networks == "ompo"
+        policy = load("advgame.agents.ompo_nets:OMPOPolicy") if ompo else self.policy(env)
+        return self.model_class()(
             policy, env, train_freq=self.train_freq, gradient_steps=self.gradient_steps,
             ent_coef=self.ent_coef, n_steps=self.n_steps,
             critic_learning_rate=self.critic_learning_rate,
@@ -407,83 +398,3 @@ class TD3Config(_OffPolicyConfig):
             action_noise=noise,
             **self._off_policy(seed, total_steps, tensorboard_log),
         )
-
-
-@functools.cache
-def _matched_sac_class() -> Any:
-    """`MatchedSAC`, built on first use so that importing the configs does not import SB3."""
-    import warnings
-
-    import torch as th
-    from stable_baselines3 import SAC
-    from stable_baselines3.common.utils import update_learning_rate
-    from torch.nn import functional as F
-
-    class MatchedSAC(SAC):
-        """SB3's SAC with its own critic step size and an actor update every k-th update.
-
-        ``critic_learning_rate`` (None: SB3's one rate) and ``actor_update_interval`` (1: SB3's
-        SAC, bit for bit): on the other updates only the critics learn, as in DBC's and OMPO's
-        schedules, and the temperature and the targets move with the actor.
-        """
-
-        def __init__(
-            self, policy: Any, env: Any, *, critic_learning_rate: float | None = None,
-            actor_update_interval: int = 1, _init_setup_model: bool = True, **kwargs: Any,
-        ) -> None:  # fmt: skip
-            self.critic_learning_rate = critic_learning_rate
-            self.actor_update_interval = actor_update_interval
-            super().__init__(policy, env, _init_setup_model=_init_setup_model, **kwargs)
-
-        def _setup_model(self) -> None:
-            with warnings.catch_warnings():
-                if "n_steps" in self.replay_buffer_kwargs:  # a loaded model's n-step buffer
-                    warnings.filterwarnings("ignore", message="`n_steps=", category=UserWarning)
-                super()._setup_model()
-
-        def _update_learning_rate(self, optimizers: Any) -> None:
-            super()._update_learning_rate(optimizers)
-            if self.critic_learning_rate is not None:
-                update_learning_rate(self.critic.optimizer, self.critic_learning_rate)
-
-        def train(self, gradient_steps: int, batch_size: int = 64) -> None:
-            """SB3's updates, the actor's (with temperature and targets) every k-th only."""
-            k = getattr(self, "actor_update_interval", 1)
-            if k == 1:
-                return super().train(gradient_steps, batch_size)
-            for _ in range(gradient_steps):
-                if self._n_updates % k == 0:
-                    super().train(1, batch_size)
-                else:
-                    self._critic_step(batch_size)
-
-        def _critic_step(self, batch_size: int) -> None:
-            """One update of the critics alone, SB3's loss at the current temperature."""
-            self.policy.set_training_mode(True)
-            self._update_learning_rate([self.critic.optimizer])
-            data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
-            discounts = data.discounts if data.discounts is not None else self.gamma
-            log_alpha = self.log_ent_coef
-            alpha = th.exp(log_alpha.detach()) if log_alpha is not None else self.ent_coef_tensor
-            with th.no_grad():
-                actions, log_prob = self.actor.action_log_prob(data.next_observations)
-                nxt = th.cat(self.critic_target(data.next_observations, actions), dim=1)
-                nxt = th.min(nxt, dim=1, keepdim=True)[0] - alpha * log_prob.reshape(-1, 1)
-                target = data.rewards + (1 - data.dones) * discounts * nxt
-            qs = self.critic(data.observations, data.actions)
-            loss = 0.5 * sum(F.mse_loss(q, target) for q in qs)
-            self.critic.optimizer.zero_grad()
-            loss.backward()  # type: ignore[union-attr]
-            self.critic.optimizer.step()
-            self._n_updates += 1
-
-    MatchedSAC.__qualname__ = "MatchedSAC"  # pickled by reference, as advgame.agents.sb3's
-    MatchedSAC.__module__ = __name__
-    return MatchedSAC
-
-
-def __getattr__(name: str) -> Any:
-    """`MatchedSAC` on first use (module ``__getattr__``: SB3 is imported only then)."""
-    if name == "MatchedSAC":
-        return _matched_sac_class()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
