@@ -53,6 +53,18 @@ def test_bad_conditions_are_clear_errors(fields, match) -> None:
         TrainConfig(**fields)
 
 
+def test_a_condition_the_scenario_has_no_preset_for_stops_the_campaign_before_training(
+    tmp_path: Path,
+) -> None:
+    from advgame.workflows.campaign import load_campaign
+
+    spec = tmp_path / "typo.toml"
+    spec.write_text(CAMPAIGN.format(methods='["sac"]', episodes=1,
+                                    conditions='eval_conditions = ["preset:ompo-nonstatonary"]'))  # fmt: skip
+    with pytest.raises(ConfigError, match='Did you mean "ompo-nonstationary"'):
+        load_campaign(spec)
+
+
 def test_each_iteration_logs_every_condition_at_the_schedule_s_current_point(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -28,12 +28,13 @@ from typing import Any
 
 import numpy as np
 
-from advgame.errors import ConfigError
+from advgame.errors import ConfigError, did_you_mean
 
 __all__ = [
     "EVAL_FIELDS",
     "TRAINING",
     "check_conditions",
+    "check_presets",
     "condition_column",
     "condition_name",
     "play_conditions",
@@ -80,6 +81,20 @@ def check_conditions(conditions: Any, episodes: int) -> None:
             f"TrainConfig.eval_conditions needs eval_episodes >= 1 (episodes per condition and "
             f"point), got {episodes!r}."
         )
+
+
+def check_presets(scenario: str, conditions: Sequence[str] | None) -> None:
+    """Refuse a ``preset:NAME`` condition that `scenario` has no preset for, before training."""
+    from advgame.core.registry import scenario_spec
+
+    wanted = [condition_name(c) for c in conditions or () if c != TRAINING]
+    presets = scenario_spec(scenario).load_presets() if wanted else {}
+    for name in wanted:
+        if name not in presets:
+            raise ConfigError(
+                f"TrainConfig.eval_conditions names preset:{name}, not a preset of "
+                f"{scenario}.{did_you_mean(name, presets)} Presets: {sorted(presets)}."
+            )
 
 
 def play_conditions(

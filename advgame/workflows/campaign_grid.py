@@ -117,8 +117,13 @@ class Campaign:
                 f"got {self.zoo!r}."
             )
         self.search_grid()  # refuses a bad override before anything trains
+        from advgame.training.conditions import check_presets
+
+        conditions = set()
         for name in self.runs():  # every TrainConfig is checked before anything runs
-            self.config(name)
+            conditions.add(tuple(self.config(name).eval_conditions or ()))
+        for wanted in conditions:  # and the in-training evaluation's presets exist
+            check_presets(self.scenario, wanted)
         self._check_evaluation()
 
     def search_grid(self) -> tuple[Mapping[str, Any], ...] | None:
