@@ -37,10 +37,12 @@ varies, and the rest of the section is the variation (a training preset, hyper-p
 `run_campaign` trains every run that is not finished, two (``workers``) at a time as jobs on
 the executor (a local process pool or Ray); a run that was interrupted resumes from its last
 iteration (``runs/``), a finished one is compacted to its last checkpoint and moved to
-``finished/`` in one rename (small enough to commit; never trained again). A run parked in
-``parked/`` (`park_campaign`, `advgame.workflows.park`: how a run longer than a session crosses
-to another session) is rebuilt in ``runs/`` first when it is further on than the
-copy there, and its parked copy deleted once it is finished. It then evaluates every finished run's
+``finished/`` in one rename (small enough to commit; never trained again); a resumed run
+takes the campaign's in-training evaluation (``eval_episodes``, ``eval_conditions``), whose
+points the train stage draws in ``evaluation.png`` (`evaluation_curves`). A run parked in
+``parked/`` or ``$ADVGAME_PARK`` (`park_campaign`, `advgame.workflows.park`: how a run longer
+than a session crosses to another session) is rebuilt in ``runs/`` first when it is further
+on than the copy there, and its parked copies deleted once it is finished. It then evaluates every finished run's
 final protagonist in one table (finished evaluation units are read back, not replayed) and
 writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-adversaries
 return (attack and preset columns alike), the interquartile range and the 95 % interval over
