@@ -34,8 +34,7 @@ class MatchedSAC(SAC):
 
     Args beyond SAC's:
         critic_learning_rate: the critics' Adam step size, constant (None: SB3's one rate).
-        actor_update_interval: updates between two of the actor, the temperature and the
-            targets (1: every update, SB3's SAC).
+        actor_update_interval: updates between two of the actor, temperature and targets.
     """
 
     def __init__(

@@ -45,7 +45,7 @@ PROTAGONISTS = "protagonists"
 OMPO_CORR10 = 0.75
 """OMPO's reward-correction weight that makes the correction about 10 % of the reward: on the
 released ``hopper-ompo/ompo`` agent's own transitions (8 episodes of its training schedule,
-4,365 steps) the discriminator's mean |logit| is 0.61 and the shifted reward 4.65, so OMPO's
+4,365 steps) the discriminator's mean ``|logit|`` is 0.61 and the shifted reward 4.65, so OMPO's
 1e-3 is 0.013 % of it and 0.75 is 10 % (docs/ompo.md, "Does the discriminator matter?")."""
 
 
