@@ -331,7 +331,13 @@ def test_the_median_agents_are_released_listed_and_played_from_the_zoo(
     table = PayoffTable.from_csv(report.parent / "payoff.csv")
     assert table.protagonists == ["hopper/atla"]  # PPO has no adversary to play
     assert set(table.adversaries) == {"nominal", "attack mad", "attack optimal"}
-    assert "hopper/atla" in zoo_summary(report.parent)
+    summary = zoo_summary(report.parent, root=root)
+    line = next(row for row in summary.splitlines() if "hopper/atla" in row)
+    # the demo's few attacks are named as what they are, not as the strongest: the worst cell
+    # of the zoo's full table (every attack, as the manifest records it) is printed beside them
+    assert "worst of these 2 attacks" in line and "strongest" not in summary
+    atla = found["hopper/atla"]
+    assert f"zoo's full table: worst {atla.worst_attack_return:5.0f} ({atla.worst_attack})" in line
     capsys.readouterr()
     both = ["evaluate", "--zoo", "hopper/ppo", "--zoo", "hopper/atla", "--zoo-adversaries"]
     assert main([*both, "--out", str(tmp_path / "x"), "--budgets"]) == 2

@@ -87,7 +87,7 @@ def test_many_agents_can_resolve_a_difference() -> None:
 
 
 def test_unknown_method_or_column_is_a_clear_error() -> None:
-    with pytest.raises(ConfigError, match="No agent of method 'c'.*'a', 'b'"):
+    with pytest.raises(ConfigError, match=r"No agent of method 'c'.*'a', 'b'"):
         compare_methods(MEANS, "a", "c", "x")
     with pytest.raises(ConfigError, match="no column 'z'"):
         compare_methods(MEANS, "a", "b", "z")

@@ -22,9 +22,9 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from advgame.agents.rsc.rsc import one_step_samples
 from advgame.agents.rsc.config import RSCConfig
 from advgame.agents.rsc.model import CausalWorldModel, perturb_states
+from advgame.agents.rsc.rsc import one_step_samples
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 X, S, C, A = 0, 1, 2, 3  # inputs: x, side, colour, action

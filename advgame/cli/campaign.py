@@ -33,7 +33,8 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
                    "far (progress.png) and stop")  # fmt: skip
     p.add_argument("--park", action="store_true",
                    help="park every run in training at its last checkpoint in parked/ (kept "
-                   "beside runs/, not in git: copy it to resume elsewhere) and stop")  # fmt: skip
+                   "beside runs/, not in git: copy it to resume elsewhere), or in "
+                   "$ADVGAME_PARK/CAMPAIGN when that is set, and stop")  # fmt: skip
     p.add_argument("--release", metavar="ZOO", nargs="?", const="", default=None,
                    help="after the table, copy each method's median agent into the zoo "
                    "(default: the repository's zoo/) with its manifest entry")  # fmt: skip
@@ -45,6 +46,7 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
 def _cmd_campaign(args: argparse.Namespace) -> int:
     from advgame.workflows.campaign import (
         done_runs,
+        evaluation_curves,
         load_campaign,
         park_campaign,
         progress_curves,
@@ -60,11 +62,13 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     if args.max_runs is not None and args.max_runs < 0:
         raise ConfigError(f"--max-runs must be >= 0, got {args.max_runs}.")
     if args.park:
+        from advgame.workflows.park import park_root
+
         parked = park_campaign(campaign, out)
         for run, iteration in parked.items():
-            print(f"parked {run} at iteration {iteration} in {out / 'parked' / run}")
+            print(f"parked {run} at iteration {iteration} in {park_root(out) / run}")
         print(
-            f"parked {len(parked)} run(s)" + (f"; {out / 'parked'} is not in git" if parked else "")
+            f"parked {len(parked)} run(s)" + (f"; {park_root(out)} is not in git" if parked else "")
         )
         return 0
     if args.status:
@@ -104,6 +108,9 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
             if curves
             else "training curves: nothing to draw yet"
         )
+        evaluated = evaluation_curves(campaign, out)
+        if evaluated:
+            print(f"in-training evaluation curves so far: {evaluated}")
         return 0
     path = run_campaign(
         campaign, out, workers=args.workers, executor=args.executor, address=args.address,

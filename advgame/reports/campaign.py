@@ -112,13 +112,15 @@ def method_curves(
     path: Path,
     ragged: bool = False,
     title: str = "",
+    columns: Sequence[str] | None = None,
 ) -> Path | None:
     """Draw each method's training return (and cost, for safe campaigns) over steps; save it.
 
     `files` maps runs (``METHOD-sSEED``) to their ``progress.csv``; a method's line is the mean
     over its runs, its band their minimum and maximum. Runs are cut to the shortest one's
     points, or with `ragged` (runs still in training) each point is over the runs that have
-    reached it (`advgame.reports.plots.plot_method_curves`); `title` heads the figure. None
+    reached it (`advgame.reports.plots.plot_method_curves`); `title` heads the figure;
+    `columns` draws those ``progress.csv`` columns instead (the in-training evaluation's). None
     when nothing is drawn.
     """
     from advgame.reports.plots import plot_method_curves
@@ -126,6 +128,8 @@ def method_curves(
     groups = {
         m: [files[r] for r in campaign.method_runs(m) if r in files] for m in campaign.methods
     }
+    if columns is not None:
+        return plot_method_curves(groups, path, list(columns), ragged=ragged, title=title)
     columns = ["protagonist_phase_true_return"]
     lines = {}
     if campaign.cost_limit is not None:

@@ -18,8 +18,17 @@ from typing import Any, Literal
 from advgame.core.fields import check_fields
 from advgame.core.registry import load
 from advgame.errors import ConfigError
+from advgame.training.conditions import check_conditions
 
-__all__ = ["METHODS", "PROTAGONISTS", "SAFE_ALGOS", "TEAM_ALGOS", "TrainConfig", "learner_config"]
+__all__ = [
+    "METHODS",
+    "OMPO_CORR10",
+    "PROTAGONISTS",
+    "SAFE_ALGOS",
+    "TEAM_ALGOS",
+    "TrainConfig",
+    "learner_config",
+]
 
 _LEARNERS = "advgame.agents.learners:LEARNERS"
 _TEAM_LEARNERS = "advgame.agents.marl.marl:MARL_LEARNERS"
@@ -32,6 +41,25 @@ TEAM_ALGOS = ("mappo", "ippo", *SAFE_ALGOS)
 (`advgame.core.team.TeamView`; our torch learners) instead of one SB3 agent."""
 PROTAGONISTS = "protagonists"
 """The key of the protagonist side in `Trainer.sides` (one agent or a whole team)."""
+
+OMPO_CORR10 = 0.75
+"""OMPO's reward-correction weight that makes the correction about 10 % of the reward: on the
+released ``hopper-ompo/ompo`` agent's own transitions (8 episodes of its training schedule,
+4,365 steps) the discriminator's mean ``|logit|`` is 0.61 and the shifted reward 4.65, so OMPO's
+1e-3 is 0.013 % of it and 0.75 is 10 % (docs/ompo.md, "Does the discriminator matter?")."""
+
+
+def _raw(algo: str, hparams: dict[str, Any]) -> dict[str, Any]:
+    """A method training `algo` with `hparams` on raw observations and rewards, nominal preset."""
+    return {
+        "preset": "default",
+        "learned": [],
+        "train_budget_scale": 1.0,
+        "protagonist_algo": algo,
+        "normalize": False,
+        "protagonist_hparams": hparams,
+    }
+
 
 METHODS: dict[str, dict[str, Any]] = {
     "ppo": {"preset": "default", "learned": [], "train_budget_scale": 1.0},
@@ -97,6 +125,46 @@ METHODS: dict[str, dict[str, Any]] = {
         "protagonist_algo": "rsc",
         "normalize": False,
     },
+    "sac-rsc-matched": _raw(
+        "sac",
+        {
+            "learning_rate": 3e-4,
+            "critic_learning_rate": 1e-3,
+            "net_arch": [256, 256, 256],
+            "learning_starts": 0,
+            "batch_size": 128,
+            "ent_coef": "auto_0.1",
+            "n_steps": 4,
+        },
+    ),
+    "sac-dbc-matched": _raw(
+        "sac",
+        {
+            "learning_rate": 3e-4,
+            "critic_learning_rate": 1e-3,
+            "net_arch": [256, 256, 256],
+            "learning_starts": 1000,
+            "batch_size": 128,
+            "ent_coef": "auto_0.1",
+            "actor_update_interval": 2,
+        },
+    ),
+    "sac-ompo-matched": _raw(
+        "sac",
+        {
+            "learning_rate": 3e-4,
+            "net_arch": [256, 256],
+            "networks": "ompo",
+            "learning_starts": 5000,
+            "batch_size": 256,
+            "ent_coef": "auto_0.2",
+            "gradient_steps": 3,
+            "actor_update_interval": 2,
+        },
+    ),
+    "rsc-noaug": _raw("rsc", {"augmented_ratio": 0.0}),
+    "ompo-nocorr": _raw("ompo", {"correction_weight": 0.0}),
+    "ompo-corr10": _raw("ompo", {"correction_weight": OMPO_CORR10}),
     **{
         algo: {
             "preset": "default",
@@ -119,7 +187,15 @@ matching under shifting dynamics, `advgame.agents.ompo.ompo`; ``--preset ompo-no
 its shifting tasks), DBC on raw observations and rewards as its authors train (a bisimulation
 encoder on SB3's SAC, `advgame.agents.dbc.dbc`), RSC likewise (SAC on real transitions mixed with
 augmented ones from a causal world model, `advgame.agents.rsc.rsc`), and the constrained learners on a
-safe scenario (``--preset`` picks the in-training disruption)."""
+safe scenario (``--preset`` picks the in-training disruption).
+
+Controls, so that a comparison isolates its method (docs/causal.md, docs/ompo.md): SAC with
+the networks, batch, n-step returns, step sizes, temperature handling, start steps and update
+schedule of the method it stands beside (``sac-rsc-matched``, ``sac-dbc-matched``,
+``sac-ompo-matched``: `advgame.agents.SACConfig`'s matching fields; a test checks each against
+the method's config), RSC without its augmented rows (``rsc-noaug``: augmented ratio 0, the
+world model still trains) and OMPO without its reward correction (``ompo-nocorr``) or with
+one of about 10 % of the reward (``ompo-corr10``, `OMPO_CORR10`)."""
 
 
 @dataclass(frozen=True)
@@ -181,7 +257,13 @@ class TrainConfig:
     vec_env: Literal["dummy", "subproc"] = "dummy"
     """VecEnv kind; "dummy" is faster for cheap MuJoCo tasks on 2 cores."""
     eval_episodes: int = 2
-    """Episodes of the quick evaluation logged at every iteration."""
+    """Episodes of the quick evaluation logged at every iteration (per condition, with
+    `eval_conditions`)."""
+    eval_conditions: list[str] | None = None
+    """The paper's in-training protocol: named test conditions (``"preset:NAME"``,
+    ``"training"``: `advgame.training.conditions`) in which the deterministic protagonist plays
+    `eval_episodes` episodes after every iteration, logged as ``eval_<name>_return`` in
+    ``progress.csv`` in place of the nominal and attacked returns (None: those two)."""
     seed: int = 0
     """Seeds models, environments and population sampling."""
     disruptors: dict[str, Any] | None = None
@@ -250,6 +332,7 @@ class TrainConfig:
                     f"TrainConfig.{name} must be a dict, got {getattr(self, name)!r}."
                 )
         self.fixed_adversaries()  # a malformed adversary spec fails here, before any run
+        check_conditions(self.eval_conditions, self.eval_episodes)
 
 
 def learner_config(algo: str, overrides: dict[str, Any] | None) -> Any:

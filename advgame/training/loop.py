@@ -23,6 +23,7 @@ from advgame.core.progress import progress
 from advgame.core.registry import load, make
 from advgame.core.views import view_factory
 from advgame.errors import FileFormatError
+from advgame.training.conditions import play_conditions, training_schedule
 from advgame.training.config import PROTAGONISTS, learner_config
 from advgame.training.population import ZERO, Member, Population
 from advgame.training.trainer import Trainer
@@ -43,6 +44,7 @@ class Run:
         self.dir = trainer.dir
         self.ckpt = self.dir / "checkpoints"
         self.prot_cfg = learner_config(self.cfg.protagonist_algo, self.cfg.protagonist_hparams)
+        self.eval_games: dict[str, Any] = {}  # the in-training evaluation's, kept (conditions)
         self.adv_cfg = learner_config(self.cfg.adversary_algo, self.cfg.adversary_hparams)
         _warn_rollouts("protagonist", self.cfg.protagonist_steps, self.prot_cfg, self.cfg.n_envs)
         if self.t.learned:  # PPO-style runs train no adversary
@@ -85,8 +87,8 @@ class Run:
             bar.close()
             if writer:
                 writer.close()
-            for side in self.t.sides.values():
-                side.close()
+            for opened in [*self.t.sides.values(), *self.eval_games.values()]:
+                opened.close()
         return self.dir
 
     # -- one iteration ----------------------------------------------------------------------
@@ -148,13 +150,17 @@ class Run:
     def _quick_eval(self, protagonists: dict[str, Any], it: int) -> dict[str, float]:
         """Mean true return of the deterministic protagonists, nominal and attacked (full budget).
 
-        Episode i plays episode ``1 + i`` of any scheduled adversary (a shift that varies per
+        With `TrainConfig.eval_conditions`, in each of those instead
+        (`advgame.training.conditions`). Episode i plays episode ``1 + i`` of any scheduled adversary (a shift that varies per
         episode, `advgame.evaluation.schedule_index`'s convention), the same ones every
         iteration, so the attacked curve is comparable across iterations.
         """
         if not self.cfg.eval_episodes:
             return {}
         t = self.t
+        if self.cfg.eval_conditions:  # the paper's protocol: named conditions instead
+            where = training_schedule(t.sides[PROTAGONISTS])
+            return play_conditions(t, protagonists, where, self.eval_games)
         game = make(self.cfg.scenario, **self.cfg.game_options(), phase="eval")
         seed = self.cfg.seed + 100_000 + it
         episodes = {"seed": seed, "episodes": self.cfg.eval_episodes, "first_index": 1}

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from advgame.core.config import load_json, save_json
 from advgame.errors import ConfigError
+from advgame.training.conditions import EVAL_FIELDS
 from advgame.training.config import TrainConfig
 from advgame.training.loop import Run
 from advgame.training.trainer import Trainer
@@ -28,12 +32,31 @@ def train(config: TrainConfig, run_dir: str | Path, progress: bool | str = True)
     return run.execute(fresh=True)
 
 
-def resume(run_dir: str | Path, progress: bool | str = True) -> Path:
-    """Continue the run in `run_dir` from its last finished iteration (`progress` as `train`)."""
+def resume(
+    run_dir: str | Path, progress: bool | str = True, evaluation: Mapping[str, Any] | None = None
+) -> Path:
+    """Continue the run in `run_dir` from its last finished iteration (`progress` as `train`).
+
+    `evaluation`: the in-training evaluation to use from now on (`TrainConfig` fields of
+    `advgame.training.conditions.EVAL_FIELDS`, which change nothing the run learns), over the
+    saved config's; ``config.json`` is rewritten with them, and ``progress.csv`` shows from
+    which iteration on they were played.
+    """
     run_dir = Path(run_dir)
     if not (run_dir / "config.json").exists():
         raise ConfigError(f"No run in {run_dir} (no config.json).")
     config = load_json(TrainConfig, run_dir / "config.json")
+    if evaluation:
+        stray = sorted(set(evaluation) - set(EVAL_FIELDS))
+        if stray:
+            raise ConfigError(
+                f"resume(evaluation=...) takes only {list(EVAL_FIELDS)}, got {stray}: the other "
+                "fields change what the run learns."
+            )
+        changed = replace(config, **evaluation)
+        if changed != config:
+            save_json(changed, run_dir / "config.json")
+            config = changed
     return Run(Trainer(config, run_dir, progress)).execute(
         fresh=not (run_dir / "state.json").exists()
     )

@@ -21,6 +21,7 @@ import numpy as np
 from advgame.agents.common.stats import EpisodeStats
 from advgame.core.registry import make
 from advgame.errors import ConfigError
+from advgame.training.conditions import check_presets
 from advgame.training.config import PROTAGONISTS, TEAM_ALGOS, TrainConfig
 from advgame.training.population import Member, Population
 
@@ -57,6 +58,7 @@ class Trainer:
         self.dir = Path(run_dir)
         self.progress = progress
         probe = make(config.scenario, **config.game_options())
+        check_presets(config.scenario, config.eval_conditions)  # hours before the first point
         self.protagonists: tuple[str, ...] = probe.protagonists
         self.team = config.protagonist_algo in TEAM_ALGOS
         if len(self.protagonists) > 1 and not self.team:

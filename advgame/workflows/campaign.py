@@ -37,10 +37,12 @@ varies, and the rest of the section is the variation (a training preset, hyper-p
 `run_campaign` trains every run that is not finished, two (``workers``) at a time as jobs on
 the executor (a local process pool or Ray); a run that was interrupted resumes from its last
 iteration (``runs/``), a finished one is compacted to its last checkpoint and moved to
-``finished/`` in one rename (small enough to commit; never trained again). A run parked in
-``parked/`` (`park_campaign`, `advgame.workflows.park`: how a run longer than a session crosses
-to another session) is rebuilt in ``runs/`` first when it is further on than the
-copy there, and its parked copy deleted once it is finished. It then evaluates every finished run's
+``finished/`` in one rename (small enough to commit; never trained again); a resumed run
+takes the campaign's in-training evaluation (``eval_episodes``, ``eval_conditions``), whose
+points the train stage draws in ``evaluation.png`` (`evaluation_curves`). A run parked in
+``parked/`` or ``$ADVGAME_PARK`` (`park_campaign`, `advgame.workflows.park`: how a run longer
+than a session crosses to another session) is rebuilt in ``runs/`` first when it is further
+on than the copy there, and its parked copies deleted once it is finished. It then evaluates every finished run's
 final protagonist in one table (finished evaluation units are read back, not replayed) and
 writes ``campaign.md`` / ``campaign.csv``: per method, the median agent by worst-of-adversaries
 return (attack and preset columns alike), the interquartile range and the 95 % interval over
@@ -66,6 +68,7 @@ from advgame.workflows.campaign_grid import Campaign, load_campaign
 from advgame.workflows.campaign_status import (
     FINISHED,
     done_runs,
+    evaluation_curves,
     progress_curves,
     run_dir,
     search_status,
@@ -82,6 +85,7 @@ __all__ = [
     "campaign_table",
     "compact",
     "done_runs",
+    "evaluation_curves",
     "load_campaign",
     "park_campaign",
     "progress_curves",
@@ -120,11 +124,12 @@ class _StatusEach:
 def _train_unit(unit: tuple[Any, str, str, bool | str]) -> str:
     """Train or resume one run to its end, then keep it compact in ``finished/`` (a worker)."""
     from advgame.training import resume, train
+    from advgame.training.conditions import EVAL_FIELDS
 
     config, partial, finished, show = unit
     path = Path(partial)
-    if (path / "config.json").exists():
-        resume(path, progress=show)
+    if (path / "config.json").exists():  # with the campaign's in-training evaluation now
+        resume(path, progress=show, evaluation={f: getattr(config, f) for f in EVAL_FIELDS})
     else:
         train(config, path, progress=show)
     compact(path)
@@ -226,6 +231,7 @@ def run_campaign(
                           progress=_StatusEach(campaign, out, todo, progress))  # fmt: skip
                 _unpark(out, todo)  # the runs that finished drop their parked copies
     status = write_status(campaign, out)
+    evaluation_curves(campaign, out)  # the in-training evaluation's figure, if runs have one
     if stage == "train":
         return out / "status.json"
     done = done_runs(status)
@@ -255,14 +261,17 @@ def _unpark(out: Path, names: Sequence[str]) -> None:
     """Rebuild in ``runs/`` each run whose parked copy is further on (drop finished ones')."""
     import shutil
 
-    from advgame.workflows.park import PARKED, parked_iteration, unpark_run
+    from advgame.workflows.park import parked_copies, parked_iteration, unpark_run
 
     for r in names:
-        parked = out / PARKED / r
+        copies = parked_copies(out, r)
         if (out / FINISHED / r).exists():
-            shutil.rmtree(parked, ignore_errors=True)
-        elif parked_iteration(parked) > _progress(out / "runs" / r):
-            log.info("campaign: %s resumes from its parked copy", r)
+            for parked in copies:
+                shutil.rmtree(parked, ignore_errors=True)
+            continue
+        parked = max(copies, key=parked_iteration)  # the first of equals: ADVGAME_PARK's
+        if parked_iteration(parked) > _progress(out / "runs" / r):
+            log.info("campaign: %s resumes from its parked copy in %s", r, parked)
             unpark_run(parked, out / "runs" / r)
 
 
@@ -270,17 +279,18 @@ def park_campaign(campaign: Campaign, out: str | Path) -> dict[str, int]:
     """Park every run of the campaign in training (``runs/``, not finished) in ``parked/``.
 
     Returns the iteration each was parked at. Safe while they train: each is parked at its
-    last checkpoint. ``parked/`` stays in the work tree (git ignores it); the train stage
-    run there later resumes each run from its copy (`advgame.workflows.park`).
+    last checkpoint. ``parked/`` stays in the work tree (git ignores it), or with
+    ``ADVGAME_PARK`` set the copies go to that folder outside it (`advgame.workflows.park.
+    park_root`); the train stage run later resumes each run from its copy.
     """
-    from advgame.workflows.park import PARKED, park_run
+    from advgame.workflows.park import park_root, park_run
 
     out = Path(out)
     parked = {}
     for r in campaign.runs():
         run = out / "runs" / r
         if not (out / FINISHED / r).exists() and (run / "state.json").is_file():
-            parked[r] = park_run(run, out / PARKED / r)
+            parked[r] = park_run(run, park_root(out) / r)
     return parked
 
 

@@ -117,8 +117,13 @@ class Campaign:
                 f"got {self.zoo!r}."
             )
         self.search_grid()  # refuses a bad override before anything trains
+        from advgame.training.conditions import check_presets
+
+        conditions = set()
         for name in self.runs():  # every TrainConfig is checked before anything runs
-            self.config(name)
+            conditions.add(tuple(self.config(name).eval_conditions or ()))
+        for wanted in conditions:  # and the in-training evaluation's presets exist
+            check_presets(self.scenario, wanted)
         self._check_evaluation()
 
     def search_grid(self) -> tuple[Mapping[str, Any], ...] | None:
@@ -197,7 +202,13 @@ class Campaign:
         own = {
             k: v for k, v in self.per_method.get(method, {}).items() if k not in ("method", "seeds")
         }
-        fields = {**METHODS[self.base_method(method)], **self.train, **own}
+        base = METHODS[self.base_method(method)]
+        fields = {**base, **self.train, **own}
+        hparams = [d.get("protagonist_hparams") for d in (base, self.train, own)]
+        if sum(h is not None for h in hparams) > 1 and all(
+            isinstance(h, Mapping) for h in hparams if h is not None
+        ):  # a method's own settings (a matched control's) stay under the campaign's overrides
+            fields["protagonist_hparams"] = {k: v for h in hparams if h for k, v in h.items()}
         try:
             return TrainConfig(scenario=self.scenario, seed=int(seed), **fields)
         except TypeError as exc:

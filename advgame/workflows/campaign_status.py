@@ -19,10 +19,12 @@ from advgame.core.config import read_json, write_atomic
 from advgame.workflows.campaign_grid import Campaign
 
 __all__ = [
+    "EVALUATION_CURVES",
     "FINISHED",
     "PROGRESS_CURVES",
     "RATE_ITERATIONS",
     "done_runs",
+    "evaluation_curves",
     "progress",
     "progress_curves",
     "progress_files",
@@ -57,13 +59,13 @@ def write_status(campaign: Campaign, out: Path, training: Sequence[str] = ()) ->
     (`advgame.workflows.claims`), as when the evaluate stage runs beside the train stage.
     """
     from advgame.workflows.claims import holder
-    from advgame.workflows.park import PARKED, parked_iteration
+    from advgame.workflows.park import parked_copies, parked_iteration
 
     runs = {}
     for r in campaign.runs():
         it, of = progress(run_dir(out, r)), campaign.config(r).iterations
         if it < of:  # a run parked further on than runs/ holds resumes from there
-            it = max(it, parked_iteration(out / PARKED / r))
+            it = max(it, *(parked_iteration(p) for p in parked_copies(out, r)))
         busy = r in training or holder(out, r) is not None  # this process or another
         state = "done" if it >= of else ("training" if busy else "partial" if it else "pending")
         runs[r] = {"state": state, "iteration": it, "of": of}
@@ -154,15 +156,16 @@ def _rows(path: Path) -> int:
 
 
 def progress_files(campaign: Campaign, out: Path) -> dict[str, Path]:
-    """Each run's furthest ``progress.csv``: of ``finished/``, ``runs/`` and ``parked/``.
+    """Each run's furthest ``progress.csv``: of ``finished/``, ``runs/`` and its parked copies.
 
     Runs that have not trained an iteration anywhere are left out.
     """
-    from advgame.workflows.park import PARKED
+    from advgame.workflows.park import parked_copies
 
     files = {}
     for r in campaign.runs():
-        copies = (out / where / r / "progress.csv" for where in (FINISHED, "runs", PARKED))
+        folders = [out / FINISHED / r, out / "runs" / r, *parked_copies(out, r)]
+        copies = (folder / "progress.csv" for folder in folders)
         rows = {path: _rows(path) for path in copies}  # each file counted once
         furthest = max(rows, key=rows.__getitem__)  # the first of equals: finished, then runs/
         if rows[furthest]:
@@ -185,6 +188,40 @@ def progress_curves(campaign: Campaign, out: Path) -> Path | None:
         return None
     title = f"{campaign.scenario}: {out.name}, {len(files)} of {len(campaign.runs())} runs so far"
     return method_curves(campaign, files, out / PROGRESS_CURVES, ragged=True, title=title)
+
+
+EVALUATION_CURVES = "evaluation.png"
+"""The figure `evaluation_curves` writes in a campaign's folder (numbers beside it, ``.csv``)."""
+
+
+def evaluation_curves(campaign: Campaign, out: Path) -> Path | None:
+    """Write ``evaluation.png``: each method's in-training evaluation per test condition.
+
+    The curves the Robust Gymnasium paper's Figure 3 draws: one panel per condition of the
+    runs' ``eval_conditions`` (`advgame.training.conditions`), a method's line the mean over its
+    runs of the deterministic protagonist's mean true return at each point, its band their
+    minimum and maximum; runs in training and parked ones count (`progress_files`), runs
+    trained without the conditions are left out. None (nothing written) when no run has a point.
+    """
+    from advgame.reports.campaign import method_curves
+    from advgame.training.conditions import condition_column
+
+    specs = [c for r in campaign.runs() for c in campaign.config(r).eval_conditions or ()]
+    columns = [condition_column(c) for c in dict.fromkeys(specs)]
+    files = {r: f for r, f in progress_files(campaign, out).items() if _has(f, columns)}
+    if not columns or not files:
+        return None
+    title = f"{campaign.scenario}: deterministic evaluation during training ({out.name})"
+    return method_curves(
+        campaign, files, out / EVALUATION_CURVES, ragged=True, title=title, columns=columns
+    )
+
+
+def _has(path: Path, columns: Sequence[str]) -> bool:
+    """Whether the CSV at `path` has every one of `columns` (its header says)."""
+    with path.open() as f:
+        header = f.readline().strip().split(",")
+    return all(c in header for c in columns)
 
 
 RATE_ITERATIONS = 3

@@ -133,17 +133,35 @@ def demo_zoo(
     )
 
 
-def zoo_summary(folder: Path) -> str:
-    """The zoo table of `demo_zoo` in a few lines: each agent's nominal and worst-attack return."""
+def zoo_summary(folder: Path, root: Path | None = None) -> str:
+    """The zoo table of `demo_zoo` in a few lines, and each agent's worst cell in the zoo.
+
+    Per agent: its nominal return and the worst of the attacks the demo played (random, MAD,
+    critic and its own released adversary: a few cheap ones, not the strongest), then the
+    worst cell of its campaign's full table as the zoo's manifest records it (every attack,
+    Robust Sarsa and the searched optimal attack included: `advgame.workflows.zoo.ZooEntry`).
+    """
     from advgame.evaluation.table.payoff import PayoffTable
+    from advgame.workflows import zoo
 
     table = PayoffTable.from_csv(folder / "payoff.csv")
+    released = {e.id: e for e in zoo.entries(root)}
     lines = ["released Hopper-v5 agents (mean true return over the evaluation seeds):"]
-    for m in table.metrics():
-        lines.append(
-            f"  {m['protagonist']:<18} nominal {m['nominal']:7.0f}   under the strongest attack "
-            f"{m['worst']:7.0f}  ({m['worst_adversary']})"
+    rows = table.metrics()
+    wide = max((len(m["worst_adversary"]) for m in rows), default=0) + 2
+    for m in rows:
+        played = f"worst of these {m['adversaries']} attacks"
+        line = (
+            f"  {m['protagonist']:<19} nominal {m['nominal']:5.0f}   {played} "
+            f"{m['worst']:5.0f} {'(' + m['worst_adversary'] + ')':<{wide}}"
         )
+        entry = released.get(m["protagonist"])
+        if entry is not None:
+            line += (
+                f"   zoo's full table: worst {entry.worst_attack_return:5.0f} "
+                f"({entry.worst_attack})"
+            )
+        lines.append(line.rstrip())
     return "\n".join(lines)
 
 

@@ -16,6 +16,12 @@ since. `unpark_run` rebuilds ``runs/RUN`` from it; `advgame.workflows.campaign.r
 does that by itself for every run whose parked copy is further on than ``runs/`` holds, and
 deletes the parked copy once the run is finished (``finished/`` holds it then).
 
+Where: ``parked/`` in the campaign's folder by default, kept out of git, so a fresh checkout
+of the repository does not have it. ``ADVGAME_PARK`` (`PARK_ENV`) names a folder outside the
+work tree instead: ``--park`` writes ``$ADVGAME_PARK/CAMPAIGN/RUN`` (``CAMPAIGN``: the
+campaign folder's name, ``causal-door``), and the train stage looks there and in ``parked/``
+and resumes from the copy that is furthest on (`park_root`, `parked_copies`).
+
 A parked run is a consistent snapshot at an iteration boundary: ``state.json`` is written
 last and names a checkpoint whose files (and the chunks its replay manifests name) are all
 there, so a park interrupted at any point leaves the previous snapshot usable. Its TensorBoard
@@ -32,10 +38,39 @@ from typing import Any
 from advgame.core.config import load_json, read_json, write_atomic
 from advgame.errors import ConfigError
 
-__all__ = ["PARKED", "park_run", "parked_iteration", "unpark_run"]
+__all__ = [
+    "PARKED",
+    "PARK_ENV",
+    "park_root",
+    "park_run",
+    "parked_copies",
+    "parked_iteration",
+    "unpark_run",
+]
 
 PARKED = "parked"
 """A campaign's folder of parked runs (beside ``runs/`` and ``finished/``)."""
+PARK_ENV = "ADVGAME_PARK"
+"""The environment variable naming a folder for parked runs outside the work tree."""
+
+
+def park_root(out: Path) -> Path:
+    """Where ``--park`` writes the parked runs of the campaign in `out`.
+
+    ``$ADVGAME_PARK/NAME`` (``NAME``: `out`'s folder name) when `PARK_ENV` is set, else
+    ``out/parked``.
+    """
+    import os
+
+    folder = os.environ.get(PARK_ENV, "").strip()
+    return Path(folder).expanduser() / Path(out).resolve().name if folder else Path(out) / PARKED
+
+
+def parked_copies(out: Path, run: str) -> list[Path]:
+    """The folders a parked copy of `run` may be in: `park_root`'s, then ``out/parked``'s."""
+    places = [park_root(out) / run, Path(out) / PARKED / run]
+    return list(dict.fromkeys(places))  # one entry when ADVGAME_PARK is not set
+
 
 _TOP = ("config.json", "population.json", "progress.csv")
 """A run's top-level files a resume reads (``state.json`` is written after them)."""

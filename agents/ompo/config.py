@@ -44,6 +44,9 @@ class OMPOConfig(_OffPolicyConfig):
     """``p`` of the critic's power loss ``|y − Q|^p / p``."""
     tomac_alpha: float = 1e-3
     """Weight of the discriminator's reward correction and of the initial-state term."""
+    correction_weight: float | None = None
+    """Weight of the reward correction alone (None: `tomac_alpha`, OMPO's): 0 is the ablation
+    without it, a larger one makes it a stated share of the reward (docs/ompo.md)."""
     reward_max: float = 1.0
     """Shift added to rewards before the clamp at 1e-6."""
 
@@ -51,6 +54,11 @@ class OMPOConfig(_OffPolicyConfig):
         super().__post_init__()
         if not self.exponent > 1:
             raise ConfigError(f"OMPOConfig.exponent must be > 1, got {self.exponent!r}.")
+        weight = self.correction_weight
+        if weight is not None and not (isinstance(weight, (int, float)) and weight >= 0):
+            raise ConfigError(
+                f"OMPOConfig.correction_weight must be a number >= 0 or None, got {weight!r}."
+            )
         self._check_ints(
             ("gradient_steps", "target_update_interval", "local_size", "disc_batch"), 1
         )
@@ -71,6 +79,7 @@ class OMPOConfig(_OffPolicyConfig):
             "MlpPolicy", env, train_freq=1, gradient_steps=self.gradient_steps,
             ent_coef=self.ent_coef, target_update_interval=self.target_update_interval,
             local_size=self.local_size, disc_batch=self.disc_batch, exponent=self.exponent,
-            tomac_alpha=self.tomac_alpha, reward_max=self.reward_max,
+            tomac_alpha=self.tomac_alpha, correction_weight=self.correction_weight,
+            reward_max=self.reward_max,
             **self._off_policy(seed, total_steps, tensorboard_log),
         )  # fmt: skip

@@ -13,7 +13,10 @@ tuning, replay buffer, save/load, logging and callbacks stay SB3's):
   ``disc_batch`` of that draw (label 0)), binary cross-entropy plus a gradient penalty
   ``λ (‖∇D(x̂)‖ − 1)²`` on random interpolations ``x̂``. Its logit estimates
   ``log ρ_local / ρ_global``.
-* **Reward**: ``r' = max(r + reward_max, 1e-6) − tomac_alpha · logit D(s, a, s')``.
+* **Reward**: ``r' = max(r + reward_max, 1e-6) − w · logit D(s, a, s')``, ``w`` the
+  `correction_weight` (None: `tomac_alpha`, the authors'; 0: none, the initial-state terms keep
+  `tomac_alpha`). Each training call logs ``train/logit_abs`` (mean ``|logit|``),
+  ``train/correction_abs`` (``w ·`` that) and ``train/correction_ratio`` (over the shifted reward).
 * **Critic** (every update): for each critic k, the target
   ``y_k = r' + γ (1 − d) [mix · Q_k(s', a') + (1 − mix) · min_j Q̄_j(s', a') − α log π(a'|s')]``
   (``a' ~ π(s')``, `critic_mix` 0.05 of the online critic) and the loss
@@ -150,6 +153,7 @@ class OMPO(SAC):
         disc_hidden, disc_lr, grad_penalty: the discriminator's width, Adam rate and λ.
         exponent: ``p`` of the critic's power loss (> 1).
         tomac_alpha: weight of the reward correction and of the initial-state term.
+        correction_weight: weight of the reward correction alone (None: `tomac_alpha`).
         reward_max: shift added to the reward before the clamp at 1e-6.
         critic_mix: share of the online critic in the target (OMPO: 0.05).
     """
@@ -168,6 +172,7 @@ class OMPO(SAC):
         grad_penalty: float = 10.0,
         exponent: float = 1.5,
         tomac_alpha: float = 1e-3,
+        correction_weight: float | None = None,
         reward_max: float = 1.0,
         critic_mix: float = 0.05,
         _init_setup_model: bool = True,
@@ -179,6 +184,9 @@ class OMPO(SAC):
         self.disc_batch, self.disc_hidden, self.disc_lr = disc_batch, disc_hidden, disc_lr
         self.grad_penalty, self.exponent, self.tomac_alpha = grad_penalty, exponent, tomac_alpha
         self.reward_max, self.critic_mix = reward_max, critic_mix
+        self.correction_weight = correction_weight
+        self.sizes: list[tuple[th.Tensor, th.Tensor]] = []
+        """Mean ``|logit|`` and shifted reward of each batch `shaped_reward` saw; `train` logs."""
         self.since_discriminator = 0
         """Transitions added since the discriminator last trained."""
         self.counts = {"critic": 0, "actor": 0, "target": 0, "discriminator": 0}
@@ -203,7 +211,7 @@ class OMPO(SAC):
         return [*state_dicts, "discriminator", "discriminator.optimizer"], tensors
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "discriminator"]
+        return [*super()._excluded_save_params(), "discriminator", "sizes"]
 
     def _store_transition(self, replay_buffer: Any, *args: Any, **kwargs: Any) -> None:
         super()._store_transition(replay_buffer, *args, **kwargs)
@@ -244,10 +252,18 @@ class OMPO(SAC):
         self.since_discriminator = 0
         return losses
 
+    @property
+    def weight(self) -> float:
+        """The reward correction's weight: `correction_weight`, or `tomac_alpha` when None."""
+        w = self.correction_weight  # (None in models saved before it existed: __init__ sets it)
+        return self.tomac_alpha if w is None else float(w)
+
     def shaped_reward(self, data: Any) -> th.Tensor:
-        """``max(r + reward_max, 1e-6) − tomac_alpha · logit D(s, a, s')`` for a batch."""
+        """``max(r + reward_max, 1e-6) − weight · logit D(s, a, s')`` for a batch."""
         reward = th.clamp(data.rewards + self.reward_max, min=1e-6)
-        return reward - self.tomac_alpha * self.discriminator.logit(self._sas(data))
+        logit = self.discriminator.logit(self._sas(data))
+        self.sizes.append((logit.abs().mean(), reward.abs().mean()))
+        return reward - self.weight * logit
 
     def policy_moves(self, data: Any, init_obs: th.Tensor) -> tuple[th.Tensor, ...]:
         """``a' ~ π(s')``, ``log π(a'|s')`` and ``a₀ ~ π(s₀)``, drawn in one forward pass."""
@@ -345,6 +361,17 @@ class OMPO(SAC):
         if actor_losses:
             self.logger.record("train/actor_loss", float(np.mean(actor_losses)))
         self.logger.record("train/ent_coef", float(self._alpha().item()))
+        self._record_correction()
+
+    def _record_correction(self) -> None:
+        """Log the mean correction size of this call's critic batches, and its share."""
+        if not self.sizes:  # no update in this call
+            return
+        logit, reward = (float(th.stack(x).mean()) for x in zip(*self.sizes, strict=True))
+        self.sizes = []
+        self.logger.record("train/logit_abs", logit)
+        self.logger.record("train/correction_abs", self.weight * logit)
+        self.logger.record("train/correction_ratio", self.weight * logit / max(reward, 1e-12))
 
     def _actor_step(self, data: Any, init_obs: th.Tensor) -> float:
         """The actor, then the temperature, then the soft target update (OMPO's order)."""

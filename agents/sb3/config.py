@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from advgame.core.registry import load
 from advgame.errors import ConfigError
 
 __all__ = [
@@ -207,13 +208,20 @@ class _OffPolicyConfig(_SB3Config):
         }
 
 
+_GOALS = ("future", "final", "episode")
+"""HER's goal selection strategies."""
+
+
 @dataclass(frozen=True)
 class SACConfig(_OffPolicyConfig):
-    """SAC with the paper's table (fixed temperature α = 0.2, [64, 64], lr 1e-3, batch 64)."""
+    """SAC with the paper's table (fixed temperature α = 0.2, [64, 64], lr 1e-3, batch 64).
+
+    Its last four fields let it learn as another method does: the ``sac-*-matched`` controls.
+    """
 
     algo: ClassVar[str] = "sac"
-    ent_coef: float = 0.2
-    """Entropy temperature α (fixed: the paper's auto alpha is False)."""
+    ent_coef: float | str = 0.2
+    """Entropy temperature α: fixed (the paper's auto alpha is False) or ``"auto_<initial>"``."""
     train_freq: int = 1
     """Environment steps between updates."""
     gradient_steps: int = 1
@@ -226,34 +234,55 @@ class SACConfig(_OffPolicyConfig):
     """HER: virtual transitions per real one."""
     her_goal_selection: str = "future"
     """HER: where new goals come from, ``"future"``, ``"final"`` or ``"episode"``."""
+    critic_learning_rate: float | None = None
+    """The critics' Adam step size (None: `learning_rate`, as SB3's SAC), constant."""
+    n_steps: int = 1
+    """Steps of the critic's returns (SB3's n-step replay buffer; 1: one-step)."""
+    actor_update_interval: int = 1
+    """Updates between two of the actor, temperature and targets (OMPO's and DBC's: 2)."""
+    networks: str = "sb3"
+    """``"sb3"`` (ReLU MLPs) or ``"ompo"`` (OMPO's: `advgame.agents.ompo.nets.OMPOPolicy`)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.her_goal_selection not in ("future", "final", "episode"):
-            raise ConfigError(
-                "SACConfig.her_goal_selection must be 'future', 'final' or 'episode', got "
-                f"{self.her_goal_selection!r}."
-            )
-        if self.her_n_sampled_goal < 1:
-            raise ConfigError(
-                f"SACConfig.her_n_sampled_goal must be >= 1, got {self.her_n_sampled_goal!r}."
-            )
+        alpha, rate = self.ent_coef, self.critic_learning_rate
+        auto = isinstance(alpha, str) and (alpha == "auto" or alpha.startswith("auto_"))
+        number = isinstance(alpha, (int, float)) and not isinstance(alpha, bool)
+        plain = self.n_steps == 1 and self.networks == "sb3"
+        checks = {
+            "her_goal_selection": (self.her_goal_selection in _GOALS, f"one of {_GOALS}"),
+            "her_n_sampled_goal": (self.her_n_sampled_goal >= 1, ">= 1"),
+            "ent_coef": (auto or number, "a number or 'auto_<initial>' (e.g. 'auto_0.1')"),
+            "critic_learning_rate": (rate is None or rate > 0, "> 0 or None"),
+            "networks": (self.networks in ("sb3", "ompo"), "'sb3' or 'ompo'"),
+            "her": (plain or not self.her, "False with n_steps > 1 or networks 'ompo'"),
+        }
+        for name, (ok, expected) in checks.items():
+            if not ok:
+                value = getattr(self, name)
+                raise ConfigError(f"SACConfig.{name} must be {expected}, got {value!r}.")
+        self._check_ints(("n_steps", "actor_update_interval", "train_freq", "gradient_steps"), 1)
+
+    @staticmethod
+    def model_class() -> Any:
+        """The SB3 class that trains (and resumes) it: `advgame.agents.sb3.sac_matched.MatchedSAC`."""
+        from advgame.agents.sb3.sac_matched import MatchedSAC
+
+        return MatchedSAC
 
     def make_model(
         self, env: Any, seed: int, total_steps: int, tensorboard_log: str | None = None
     ) -> Any:
-        """Build an SB3 SAC on `env` (``MultiInputPolicy`` on Dict observations)."""
-        from stable_baselines3 import SAC
-
-        return SAC(
-            self.policy(env),
-            env,
-            train_freq=self.train_freq,
-            gradient_steps=self.gradient_steps,
-            ent_coef=self.ent_coef,
-            **self._her(env),
-            **self._off_policy(seed, total_steps, tensorboard_log),
-        )
+        """Build a `MatchedSAC` on `env` (``MultiInputPolicy`` on Dict observations)."""
+        ompo = self.networks == "ompo"
+        policy = load("advgame.agents.ompo.nets:OMPOPolicy") if ompo else self.policy(env)
+        return self.model_class()(
+            policy, env, train_freq=self.train_freq, gradient_steps=self.gradient_steps,
+            ent_coef=self.ent_coef, n_steps=self.n_steps,
+            critic_learning_rate=self.critic_learning_rate,
+            actor_update_interval=self.actor_update_interval,
+            **self._her(env), **self._off_policy(seed, total_steps, tensorboard_log),
+        )  # fmt: skip
 
     def _her(self, env: Any) -> dict[str, Any]:
         """The replay-buffer arguments HER needs (none without it)."""
