@@ -36,11 +36,11 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from advgame.core.physics import ThreadedStepper, shared_stepper
-from advgame.core.task import GymTask, StepResult
+from advgame.core.task import ArrayResult, GymTask, StepResult
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 from advgame.scenarios.mujoco_formulas import FORMULAS, Formula, Outcome, Stacked
 
-__all__ = ["TASKS", "BatchedGymTask", "BatchedMujocoEnv", "step_envs"]
+__all__ = ["TASKS", "BatchedGymTask", "BatchedMujocoEnv", "batched_step", "step_envs"]
 
 TASKS = tuple(FORMULAS)
 """The task ids a `BatchedMujocoEnv` can batch."""
@@ -66,6 +66,38 @@ def step_envs(
     dt = np.array([e.dt for e in envs])
     stepper.step(envs, actions, env.frame_skip, formula.contact_forces)
     return formula.after(Stacked(envs), env, before, actions, dt)
+
+
+def batched_step(
+    tasks: Any, actions: np.ndarray, threads: int | None = None
+) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, dict[str, Any]] | None:
+    """Step the unwrapped envs of `GymTask` copies of one MuJoCo v5 task as one batch.
+
+    Returns ``({"protagonist": obs}, rewards, terminations, infos)`` over ``[N, ...]``, or
+    None when the copies cannot batch (another task or keywords, extra wrappers, rendering, a
+    wrong action shape): the caller then steps them one by one.
+    """
+    t0 = tasks[0]
+    env_id = t0.env.unwrapped.spec.id if t0.env.unwrapped.spec else None
+    key = (type(t0), env_id, repr(t0.env.spec.kwargs if t0.env.spec else None))
+    same = env_id in FORMULAS and all(
+        (
+            type(t),
+            t.env.unwrapped.spec.id if t.env.unwrapped.spec else None,
+            repr(t.env.spec.kwargs if t.env.spec else None),
+        )
+        == key
+        and t._inner is t.env.unwrapped
+        and t._inner.render_mode is None  # a rendering env draws inside its own step
+        for t in tasks
+    )
+    if not same or actions.shape != (len(tasks), t0._inner.model.nu):
+        return None
+    envs = [t._inner for t in tasks]
+    obs, reward, terminated, info = step_envs(
+        envs, FORMULAS[env_id], actions, shared_stepper(threads)
+    )
+    return {GymTask.AGENT: obs}, reward, terminated, info
 
 
 class BatchedMujocoEnv(VectorEnv):
@@ -293,3 +325,17 @@ class BatchedGymTask(GymTask):
             t._result(obs[i], reward[i], terminated[i], False, {k: v[i] for k, v in info.items()})
             for i, t in enumerate(tasks)
         ]
+
+    batched = True
+
+    @classmethod
+    def step_arrays(cls, tasks: Any, actions: Any, threads: int | None = None) -> ArrayResult:
+        """Step N copies as one batch (`batched_step`); one by one where they cannot batch."""
+        stepped = batched_step(tasks, np.asarray(actions[cls.AGENT]), threads)
+        if stepped is None:
+            return super().step_arrays(tasks, actions, threads)
+        obs, reward, terminated, info = stepped
+        n = len(tasks)
+        cost_key = tasks[0].cost_key
+        cost = np.asarray(info[cost_key], np.float64) if cost_key in info else np.zeros(n)
+        return ArrayResult(obs, reward, cost, terminated, np.zeros(n, np.bool_), info)

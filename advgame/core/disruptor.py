@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.array_hooks import ArrayHooks
 from advgame.core.fields import check_fields
 from advgame.core.schedule import Schedule
 from advgame.errors import ActionError, BudgetError, UnknownNameError, did_you_mean
@@ -154,7 +155,7 @@ class DisruptorSpec(abc.ABC):
         """Bind the spec to `task`, checking names and shapes against it."""
 
 
-class Disruptor(abc.ABC):
+class Disruptor(ArrayHooks, abc.ABC):
     """A disruptor bound to a task: the adversary's action space and one hook.
 
     Args:
@@ -253,7 +254,13 @@ class Disruptor(abc.ABC):
         return self.norm == "linf" and in_unit_box(u)
 
     def _decode_slow(self, u: np.ndarray) -> tuple[np.ndarray, int]:
-        """The precise checks: raise on NaN/inf, clip and count, project L2 blocks."""
+        """The precise checks of `_clip`, its clips counted in ``clip_count``."""
+        u, clipped = self._clip(u)
+        self.clip_count += clipped
+        return u, clipped
+
+    def _clip(self, u: np.ndarray) -> tuple[np.ndarray, int]:
+        """Raise on NaN/inf, clip and count, project L2 blocks (``clip_count`` untouched)."""
         m = float(np.abs(u).max())  # one reduction: NaN and inf both fail `m <= bound`
         if not math.isfinite(m):
             raise ActionError(
@@ -269,7 +276,6 @@ class Disruptor(abc.ABC):
         if self.norm == "l2":
             u, projected = self._project_l2(u)
             clipped += projected
-        self.clip_count += clipped
         return u, clipped
 
     def _project_l2(self, u: np.ndarray) -> tuple[np.ndarray, int]:
@@ -315,7 +321,7 @@ class Disruptor(abc.ABC):
         """Change the simulator before it steps; `u` is None on a step the schedule skips."""
         raise NotImplementedError(f"{type(self).__name__} is not an environment disruptor.")
 
-    def restore(self, sim: MujocoSim) -> None:  # noqa: B027 - an optional hook, no-op by default
+    def restore(self, sim: MujocoSim) -> None:
         """Put every parameter this disruptor changed back to its nominal value."""
 
     # -- the hooks over N alike games (`advgame.core.lockstep`): row by row unless overridden --

@@ -221,6 +221,29 @@ class ActionRuntime(AdditiveDisruptor):
             for acts, row in zip(actions, new, strict=True):
                 acts[t] = row
 
+    def action_array(
+        self, actions: dict[str, np.ndarray], u: np.ndarray, rngs: Sequence[np.random.Generator]
+    ) -> None:
+        """`action` of every row at once (additive and noisy modes on 1-D Boxes: no draws).
+
+        Each row gets exactly the single copy's value; the probabilistic mode and Discrete
+        actions draw from each copy's own generator, row by row.
+        """
+        if not self._flat:
+            super().action_array(actions, u, rngs)
+            return
+        for t, block, space, bounds in self._plan:
+            b = u if block is None else u[:, block]
+            a = actions[t]
+            if a.dtype.kind != "f" or a.dtype.itemsize > 8:  # as `action`: enters as float64
+                a = a.astype(np.float64)
+            if self.mode == "additive":
+                new = a + b * (self.unit if block is None else self.unit[block])
+            else:
+                adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
+                new = (1.0 - self.alpha) * a.astype(np.float64) + self.alpha * adv
+            actions[t] = new.clip(*bounds).astype(space.dtype)
+
 
 def _size(space: spaces.Box | spaces.Discrete) -> int:
     return int(space.n) if isinstance(space, spaces.Discrete) else int(np.prod(space.shape))

@@ -1,0 +1,408 @@
+"""The array game: N copies of one scenario stepped as arrays ``[N, ...]``.
+
+`ArrayGame` holds N alike games (one scenario, one disruptor set-up) and plays the
+Disrupted-MDP's moves for all of them at once, with the same protocol as `Game` (see
+`advgame.core.game`): per step, a *sense* call (observation adversaries see the true state
+``s_t`` and choose δ; the protagonists are shown ``s_t + δ``) and an *act* call (environment
+adversaries set the simulator, action adversaries perturb the protagonists' actions, the
+simulator steps, reward and cost adversaries perturb what the learners observe). Actions go in
+as ``{agent: [N, ...]}``; observations, rewards, costs, payoffs, terminations, truncations,
+clip counts and info terms come out as arrays. On the hot path there is no Python loop over
+copies or agents' dicts:
+
+* each disruptor's budget decode and hook run once over the rows it acts on (one runtime per
+  disruptor; `advgame.core.array_hooks.ArrayHooks`), each copy keeping its own clip count;
+* schedules are boolean arrays ``[N]`` (constant ones never change; step-dependent ones are
+  computed from the copies' step counters, probabilistic ones draw from each copy's own
+  generator in the single game's order);
+* the simulators step as one batch through the task base's `TaskBase.step_arrays` (MuJoCo v5
+  and Safety tasks: `mj_step` of every copy on the simulator threads, observations and rewards
+  over ``[N, ...]``). Task bases that cannot batch (Box2D, robosuite, robotics) step copy by
+  copy there, and the array game logs that it does.
+
+What stays per copy is what is per copy: resets (each copy's `Game.reset`, so seeds, the
+restored model and the first step's schedule draws are the single game's), environment
+disruptors (dynamics and forces edit each copy's own model and data, through the copy's own
+`Game._disrupt_environment`), and the copies' generators. Every copy plays bit for bit as the
+single game with the same seed and the same actions (``tests/test_array_game.py``).
+
+The copies' `Game` objects hold each copy's task and model; while an `ArrayGame` plays them,
+their own move state (``t``, observations, movers) is not kept up to date.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from advgame.core.game import Game
+from advgame.core.moves import protagonist_rows
+from advgame.core.schedule import Schedule
+from advgame.core.task import GymTask
+from advgame.errors import ActionError, ConfigError
+
+__all__ = ["ArrayGame", "ArrayStep", "unsupported"]
+
+log = logging.getLogger(__name__)
+_LOGGED: set[type] = set()
+
+
+def unsupported(games: Sequence[Game]) -> str | None:
+    """Why `games` cannot be one `ArrayGame` (None: they can)."""
+    from advgame.core.lockstep import alike
+
+    g0 = games[0]
+    if not alike(games):
+        return "the games are not alike (different scenarios, set-ups or spaces)"
+    if not isinstance(g0.task, GymTask):
+        return f"{type(g0.task).__name__} is not a single-protagonist Gymnasium task"
+    space = g0.observation_space(g0.protagonists[0])
+    if not isinstance(space, spaces.Box) or len(space.shape) != 1:
+        return f"the protagonist observes {space}, not a flat Box"
+    if g0._setup_ds:
+        return "workspace (setup-move) disruptors act at reset"
+    return None
+
+
+@dataclass
+class ArrayStep:
+    """What one act call of an `ArrayGame` returns, row ``i`` for copy ``i``."""
+
+    rewards: dict[str, np.ndarray]
+    """The reward each protagonist observes ``[N]`` (after reward disruptors)."""
+    costs: dict[str, np.ndarray]
+    """The cost each protagonist observes ``[N]`` (after cost disruptors)."""
+    reward: np.ndarray
+    """The true team reward ``[N]``."""
+    cost: np.ndarray
+    """The true team cost ``[N]``."""
+    payoff: np.ndarray
+    """``reward - cost_weight * cost``; every adversary is paid its negative."""
+    terminated: np.ndarray
+    """``[N]`` bool."""
+    truncated: np.ndarray
+    """``[N]`` bool (the time limit included)."""
+    info: dict[str, np.ndarray]
+    """The task's info terms ``[N, ...]``."""
+    clipped: dict[str, np.ndarray]
+    """Adversaries of the act move -> components clipped ``[N]`` (0 where it did not act)."""
+    acted: dict[str, np.ndarray]
+    """Adversaries of the act move -> whether its action counted ``[N]``."""
+    observations: dict[str, np.ndarray]
+    """The true observations after the step ``[N, ...]`` (final ones where an episode ended)."""
+
+
+class ArrayGame:
+    """N alike games played as arrays (see the module docstring).
+
+    Args:
+        games: the copies, built alike (e.g. ``[advgame.make(id, preset=p) for _ in range(N)]``).
+        threads: simulator threads of a batched step (``None``: the process's default).
+
+    Raises:
+        ConfigError: the games cannot be played as arrays (`unsupported` says why).
+
+    Example:
+        >>> import advgame, numpy as np
+        >>> game = ArrayGame([advgame.make("Hopper-v5", preset="default") for _ in range(4)])
+        >>> obs = game.reset(seed=0)["protagonist"]
+        >>> shown = game.sense({"observation_adversary": np.zeros((4, 11))})
+        >>> step = game.act({"protagonist": np.zeros((4, 3)), "action_adversary": np.ones((4, 3))})
+        >>> step.reward.shape, step.clipped["action_adversary"].tolist()
+        ((4,), [0, 0, 0, 0])
+
+    """
+
+    def __init__(self, games: Sequence[Game], threads: int | None = None) -> None:
+        reason = unsupported(games)
+        if reason is not None:
+            raise ConfigError(f"These games cannot be played as one ArrayGame: {reason}.")
+        self.games = list(games)
+        self.n = len(games)
+        self.threads = threads
+        g0 = self.games[0]
+        self.protagonists = g0.protagonists
+        self.adversaries = g0.adversaries
+        self.disruptors = g0.disruptors
+        """The array runtimes: the first copy's (the copies share their specs and budgets)."""
+        self.cost_weight = g0.cost_weight
+        self._tasks = [g.task for g in self.games]
+        self._task_type = type(g0.task)
+        self._limit = g0.task.max_episode_steps
+        self._sensing, self._stale = g0._sensing, g0._stale
+        self._action_ds, self._reward_ds = g0._action_ds, g0._reward_ds
+        self._env_ds, self._act_ds = g0._env_ds, g0._act_ds
+        self._p_spaces = g0._p_spaces
+        self._rngs = [g._rng for g in self.games]
+        n = self.n
+        self.t = np.zeros(n, np.int64)
+        """Each copy's protagonist step within its episode."""
+        self.done = np.ones(n, np.bool_)
+        """Copies whose episode is over (reset them before the next act)."""
+        self.clip_count = {a: np.zeros(n, np.int64) for a in self.adversaries}
+        """Per adversary, each copy's clipped components since its reset."""
+        self._last = {a: np.zeros((n, *d.shape)) for a, d in self.disruptors.items()}
+        self._has_last = {a: np.zeros(n, np.bool_) for a in self.adversaries}
+        self._active = {a: np.zeros(n, np.bool_) for a in self.adversaries}
+        self._true: dict[str, np.ndarray] = {}
+        self._shown: dict[str, np.ndarray] = {}
+        if not self._task_type.batched and self._task_type not in _LOGGED:
+            _LOGGED.add(self._task_type)
+            log.warning(
+                "%s cannot batch its simulators: the array game steps its %d copies one by one "
+                "(the disruptors still act as arrays).",
+                self._task_type.__name__,
+                n,
+            )
+
+    # -- the phase and budgets ------------------------------------------------------------------
+    @property
+    def phase(self) -> str:
+        """``"train"`` or ``"eval"``: which schedules are live (all copies share it)."""
+        return self.games[0].phase
+
+    @phase.setter
+    def phase(self, value: str) -> None:
+        for g in self.games:
+            g.phase = value
+
+    def set_observation_scale(self, target: str, std: Any) -> int:
+        """`Game.set_observation_scale` for every copy (normalized-space budgets)."""
+        counts = [g.set_observation_scale(target, std) for g in self.games]
+        return counts[0]
+
+    # -- episodes -------------------------------------------------------------------------------
+    def reset(
+        self, seed: int | Sequence[int | None] | None = None, rows: Any = None
+    ) -> dict[str, np.ndarray]:
+        """Reset copies `rows` (default all): copy ``i`` with ``seed + i``, or ``seed[i]``.
+
+        Each copy resets through its own `Game.reset` (nominal model restored, disruptors reset,
+        its generator seeded, the first step's schedules drawn). Returns what every copy's
+        protagonists are shown now ``{protagonist: [N, ...]}`` (sense moves still to come).
+        """
+        idx = np.arange(self.n) if rows is None else np.flatnonzero(np.asarray(rows, np.bool_))
+        if seed is None or isinstance(seed, int | np.integer):
+            seeds = [None if seed is None else int(seed) + int(i) for i in idx]
+        else:
+            seeds = [list(seed)[i] for i in idx]
+        first = not self._true
+        for i, s in zip(idx, seeds, strict=True):
+            g = self.games[i]
+            g.reset(seed=s)
+            self._rngs[i] = g._rng
+            for p in self.protagonists:
+                if first:
+                    space = g.observation_space(p)
+                    self._true[p] = np.zeros((self.n, *space.shape), space.dtype)
+                    self._shown[p] = self._true[p].copy()
+                self._true[p][i] = g._true_obs[p]
+                self._shown[p][i] = g._shown[p]
+            for a in self.adversaries:
+                self._active[a][i] = g._active[a]
+            first = False
+        self.t[idx] = 0
+        self.done[idx] = False
+        for a in self.adversaries:
+            self.clip_count[a][idx] = 0
+            self._has_last[a][idx] = False
+        return self.shown()
+
+    def shown(self) -> dict[str, np.ndarray]:
+        """What the protagonists are shown now (copies of the arrays)."""
+        return {p: v.copy() for p, v in self._shown.items()}
+
+    def state(self) -> np.ndarray:
+        """The true state ``s_t`` of every copy ``[N, ...]`` (what adversaries observe)."""
+        return self._true[self.protagonists[0]]
+
+    def observe(self, agent: str) -> np.ndarray:
+        """What `agent` observes now in every copy: protagonists what they are shown."""
+        return self._shown[agent] if agent in self._shown else self.state()
+
+    def sensing(self) -> np.ndarray:
+        """Copies in which an observation adversary moves this step (a sense move) ``[N]``."""
+        out = np.zeros(self.n, np.bool_)
+        for d in self._sensing:
+            out |= self._active[d.agent]
+        return out
+
+    def active(self, agent: str) -> np.ndarray:
+        """Copies in which adversary `agent`'s action counts this step ``[N]`` (a copy)."""
+        return self._active[agent].copy()
+
+    # -- the moves -------------------------------------------------------------------------------
+    def sense(self, actions: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """The sense move: each active observation adversary's δ added to what copies show.
+
+        ``actions[agent]`` holds one row per copy for every sensing adversary (rows of copies
+        where it does not act are ignored). Returns the protagonists' shown observations.
+        """
+        self._require()
+        for d in self._sensing:
+            rows = self._active[d.agent]
+            if rows.any():
+                self._decode(d, actions, rows)
+                self._apply_obs(d, self._shown, self._last[d.agent], rows)
+        return self.shown()
+
+    def act(self, actions: Mapping[str, Any]) -> ArrayStep:
+        """The act move of every copy; the simulators step as one batch.
+
+        ``actions`` holds ``[N, ...]`` for every protagonist and every act-move adversary
+        (environment, action, reward, stale observation). Finished copies stay `done` until `reset`.
+        """
+        self._require()
+        clipped: dict[str, np.ndarray] = {}
+        acted: dict[str, np.ndarray] = {}
+        for d in self._act_ds:
+            rows = acted[d.agent] = self._active[d.agent].copy()
+            clipped[d.agent] = self._decode(d, actions, rows) if rows.any() else rows * 0
+        acts = {}
+        for p, (space, shape) in self._p_spaces.items():
+            checked = protagonist_rows(p, space, shape, self._take(actions, p))
+            acts[p] = checked if isinstance(checked, np.ndarray) else np.stack(checked)
+        if self._env_ds:
+            self._disrupt_environment(acted)
+        for d in self._action_ds:
+            rows = self._effective(d)
+            if rows.all():
+                d.action_array(acts, self._last[d.agent], self._rngs)
+            elif rows.any():
+                sub = {p: v[rows] for p, v in acts.items()}
+                d.action_array(sub, self._last[d.agent][rows], self._rows(rows))
+                for p in acts:  # a copy: `acts[p]` may be the caller's own array
+                    acts[p] = acts[p].copy()
+                    acts[p][rows] = sub[p]
+        return self._after_task(acts, clipped, acted)
+
+    def _after_task(self, acts: dict[str, np.ndarray], clipped: dict, acted: dict) -> ArrayStep:
+        r = self._task_type.step_arrays(self._tasks, acts, self.threads)
+        payoff = r.reward - self.cost_weight * r.cost
+        rewards = {p: r.reward.copy() for p in self.protagonists}
+        costs = {p: r.cost.copy() for p in self.protagonists}
+        for d in self._reward_ds:
+            rows = self._effective(d)
+            if rows.all():
+                d.reward_array(rewards, costs, self._last[d.agent])
+            elif rows.any():
+                sub_r = {p: v[rows] for p, v in rewards.items()}
+                sub_c = {p: v[rows] for p, v in costs.items()}
+                d.reward_array(sub_r, sub_c, self._last[d.agent][rows])
+                for p in self.protagonists:
+                    rewards[p][rows], costs[p][rows] = sub_r[p], sub_c[p]
+        self.t += 1
+        truncated = r.truncated.copy()
+        if self._limit is not None:
+            truncated |= self.t >= self._limit
+        self.done = r.terminated | truncated
+        self._true = dict(r.observations)
+        self._begin_step(acted)
+        return ArrayStep(
+            rewards, costs, r.reward, r.cost, payoff, r.terminated.copy(), truncated,
+            r.info, clipped, acted, {p: v.copy() for p, v in self._true.items()},
+        )  # fmt: skip
+
+    def _begin_step(self, pending: Mapping[str, np.ndarray]) -> None:
+        """Draw step t's schedules of the live copies and build what their protagonists see."""
+        live = ~self.done
+        phase = self.phase
+        for d in self.disruptors.values():
+            value = d.schedule.constant(phase)
+            if value is None:
+                self._active[d.agent] = self._draw(d.schedule, live)
+            else:  # constant in this phase (the phase may have changed since the last step)
+                self._active[d.agent][live] = value
+        shown = {p: v.copy() for p, v in self._true.items()}
+        for d in self._stale:  # δ chosen in the act move that produced this observation
+            rows = pending[d.agent] if not d.schedule.hold else self._has_last[d.agent]
+            self._apply_obs(d, shown, self._last[d.agent], rows & live)
+        for d in self._sensing:
+            if d.schedule.hold:
+                rows = ~self._active[d.agent] & self._has_last[d.agent] & live
+                self._apply_obs(d, shown, self._last[d.agent], rows)
+        self._shown = shown
+
+    def _draw(self, schedule: Schedule, live: np.ndarray) -> np.ndarray:
+        """`Schedule.is_active` of every live copy's step, draws from each copy's generator."""
+        t = self.t
+        if not schedule.in_phase(self.phase):
+            return np.zeros(self.n, np.bool_)
+        on = live & (t >= schedule.start)
+        if schedule.stop is not None:
+            on &= t < schedule.stop
+        if schedule.once_per_episode:
+            on &= t == schedule.start
+        else:
+            on &= (t - schedule.start) % schedule.every == 0
+        if schedule.probability < 1.0:
+            for i in np.flatnonzero(on):
+                on[i] = self._rngs[i].random() < schedule.probability
+        return on
+
+    # -- helpers --------------------------------------------------------------------------------
+    def _require(self) -> None:
+        if self.done.any():
+            rows = np.flatnonzero(self.done).tolist()
+            raise ActionError(
+                f"Copies {rows} have no live episode; call reset(rows=game.done) before moving."
+            )
+
+    def _take(self, actions: Mapping[str, Any], agent: str) -> Any:
+        if agent not in actions:
+            raise ActionError(
+                f"This move needs actions for {agent!r}: one row per copy ({self.n} rows)."
+            )
+        return actions[agent]
+
+    def _decode(self, d: Any, actions: Mapping[str, Any], rows: np.ndarray) -> np.ndarray:
+        """Decode `d`'s actions on `rows` into its last perturbation; the clip counts ``[N]``."""
+        a, every = self._take(actions, d.agent), bool(rows.all())
+        if not every:
+            a = np.asarray(a)
+            a = a[rows] if a.ndim and len(a) == self.n else a
+        u, counts = d.decode_array(a, self.n if every else int(rows.sum()))
+        last, out = self._last[d.agent], np.zeros(self.n, np.int64)
+        if every:
+            last[...] = u
+            out = counts
+        else:
+            last[rows] = u
+            out[rows] = counts
+        self._has_last[d.agent] |= rows
+        self.clip_count[d.agent] += out
+        return out
+
+    def _apply_obs(
+        self, d: Any, shown: dict[str, np.ndarray], u: np.ndarray, rows: np.ndarray
+    ) -> None:
+        if rows.all():
+            d.observation_array(shown, u)
+        elif rows.any():
+            sub = {p: v[rows] for p, v in shown.items()}
+            d.observation_array(sub, u[rows])
+            for p, v in sub.items():
+                shown[p][rows] = v
+
+    def _effective(self, d: Any) -> np.ndarray:
+        """Copies where `d`'s perturbation is in force: it acted, or it holds its last one."""
+        return self._has_last[d.agent] if d.schedule.hold else self._active[d.agent]
+
+    def _rows(self, rows: np.ndarray) -> list[np.random.Generator]:
+        return [self._rngs[i] for i in np.flatnonzero(rows)]
+
+    def _disrupt_environment(self, acted: Mapping[str, np.ndarray]) -> None:
+        """Each copy's environment disruptors edit its own model and data (as `Game` does)."""
+        agents = [d.agent for d in self._env_ds]
+        for i, g in enumerate(self.games):
+            g._disrupt_environment({a: self._last[a][i] for a in agents if acted[a][i]})
+
+    def close(self) -> None:
+        """Close every copy."""
+        for g in self.games:
+            g.close()
