@@ -41,6 +41,7 @@ import numpy as np
 from gymnasium import spaces
 
 from advgame.core.game import Game
+from advgame.core.lockstep import alike
 from advgame.core.moves import protagonist_rows
 from advgame.core.schedule import Schedule
 from advgame.core.task import GymTask
@@ -54,8 +55,6 @@ _LOGGED: set[type] = set()
 
 def unsupported(games: Sequence[Game]) -> str | None:
     """Why `games` cannot be one `ArrayGame` (None: they can)."""
-    from advgame.core.lockstep import alike
-
     g0 = games[0]
     if not alike(games):
         return "the games are not alike (different scenarios, set-ups or spaces)"
@@ -151,6 +150,8 @@ class ArrayGame:
         self._active = {a: np.zeros(n, np.bool_) for a in self.adversaries}
         self._true: dict[str, np.ndarray] = {}
         self._shown: dict[str, np.ndarray] = {}
+        self.last_clipped: dict[str, np.ndarray] = {}
+        """Sensing adversaries -> components clipped in the last sense move ``[N]``."""
         if not self._task_type.batched and self._task_type not in _LOGGED:
             _LOGGED.add(self._task_type)
             log.warning(
@@ -191,27 +192,58 @@ class ArrayGame:
             seeds = [None if seed is None else int(seed) + int(i) for i in idx]
         else:
             seeds = [list(seed)[i] for i in idx]
-        first = not self._true
         for i, s in zip(idx, seeds, strict=True):
-            g = self.games[i]
-            g.reset(seed=s)
-            self._rngs[i] = g._rng
-            for p in self.protagonists:
-                if first:
-                    space = g.observation_space(p)
-                    self._true[p] = np.zeros((self.n, *space.shape), space.dtype)
-                    self._shown[p] = self._true[p].copy()
-                self._true[p][i] = g._true_obs[p]
-                self._shown[p][i] = g._shown[p]
-            for a in self.adversaries:
-                self._active[a][i] = g._active[a]
-            first = False
-        self.t[idx] = 0
-        self.done[idx] = False
-        for a in self.adversaries:
-            self.clip_count[a][idx] = 0
-            self._has_last[a][idx] = False
+            self.games[i].reset(seed=s)
+            self.pull(int(i))
         return self.shown()
+
+    def pull(self, i: int) -> None:
+        """Read copy `i`'s state from its `Game` (after the game moved or reset on its own).
+
+        The single-agent views reset their games themselves (`SingleAgentView.reset` plays the
+        moves before the learner's first decision); the array game then goes on from there.
+        """
+        g = self.games[i]
+        self._rngs[i] = g._rng
+        for p in self.protagonists:
+            if p not in self._true:
+                space = g.observation_space(p)
+                self._true[p] = np.zeros((self.n, *space.shape), space.dtype)
+                self._shown[p] = self._true[p].copy()
+            self._true[p][i] = g._true_obs[p]
+            self._shown[p][i] = g._shown[p]
+        for a in self.adversaries:
+            self._active[a][i] = g._active.get(a, False)
+            self._has_last[a][i] = a in g._last
+            if a in g._last:
+                self._last[a][i] = g._last[a]
+            self.clip_count[a][i] = g.disruptors[a].clip_count
+        self.t[i] = g.t
+        self.done[i] = not g.agents
+
+    def push(self, i: int, sensed: bool) -> None:
+        """Write copy `i`'s state back into its `Game`, so that it can go on playing alone.
+
+        `sensed`: whether this step's sense move was made (the game is then at its act move).
+        """
+        g = self.games[i]
+        g._true_obs = {p: self._true[p][i].copy() for p in self.protagonists}
+        g._shown = {p: self._shown[p][i].copy() for p in self.protagonists}
+        g._state = g.task.state(g._true_obs)
+        g._active = {a: bool(v[i]) for a, v in self._active.items()}
+        g._last = {a: self._last[a][i].copy() for a in self.adversaries if self._has_last[a][i]}
+        for a, d in g.disruptors.items():
+            d.clip_count = int(self.clip_count[a][i])
+        g.t = int(self.t[i])
+        g.task._steps = g.t  # type: ignore[attr-defined]  # a GymTask (`unsupported`)
+        g.agents = [] if self.done[i] else list(g.possible_agents)
+        sense, g._act_next = g._movers(g._active)
+        if self.done[i]:
+            g.next_movers = frozenset()
+        elif sense and not sensed:
+            g.move, g.next_movers = "sense", sense
+        else:
+            g.move, g.next_movers = "act", g._act_next
 
     def shown(self) -> dict[str, np.ndarray]:
         """What the protagonists are shown now (copies of the arrays)."""
@@ -237,18 +269,20 @@ class ArrayGame:
         return self._active[agent].copy()
 
     # -- the moves -------------------------------------------------------------------------------
-    def sense(self, actions: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def sense(self, actions: Mapping[str, Any], rows: Any = None) -> dict[str, np.ndarray]:
         """The sense move: each active observation adversary's δ added to what copies show.
 
         ``actions[agent]`` holds one row per copy for every sensing adversary (rows of copies
-        where it does not act are ignored). Returns the protagonists' shown observations.
+        where it does not act are ignored); `rows` (a bool mask) limits the move to some
+        copies. Returns the protagonists' shown observations; `last_clipped` the clips.
         """
-        self._require()
+        mask = np.ones(self.n, np.bool_) if rows is None else np.asarray(rows, np.bool_)
+        self._require(mask)
         for d in self._sensing:
-            rows = self._active[d.agent]
-            if rows.any():
-                self._decode(d, actions, rows)
-                self._apply_obs(d, self._shown, self._last[d.agent], rows)
+            on = self._active[d.agent] & mask
+            self.last_clipped[d.agent] = self._decode(d, actions, on) if on.any() else on * 0
+            if on.any():
+                self._apply_obs(d, self._shown, self._last[d.agent], on)
         return self.shown()
 
     def act(self, actions: Mapping[str, Any]) -> ArrayStep:
@@ -346,9 +380,10 @@ class ArrayGame:
         return on
 
     # -- helpers --------------------------------------------------------------------------------
-    def _require(self) -> None:
-        if self.done.any():
-            rows = np.flatnonzero(self.done).tolist()
+    def _require(self, mask: np.ndarray | None = None) -> None:
+        done = self.done if mask is None else self.done & mask
+        if done.any():
+            rows = np.flatnonzero(done).tolist()
             raise ActionError(
                 f"Copies {rows} have no live episode; call reset(rows=game.done) before moving."
             )
