@@ -51,6 +51,8 @@ class VectorView(DummyVecEnv):
             the same agent.
         exact: keep every episode bit for bit the one a single view plays (True); False lets
             a recurrent opponent's copies share one forward pass (`act_batch`'s ``exact``).
+        array: play the views as one `ArrayGame` where they allow it
+            (`advgame.core.vector_array`); False keeps the lockstep path (benchmarks).
 
     Example:
         >>> from advgame.adversaries import GaussianAdversary
@@ -67,7 +69,10 @@ class VectorView(DummyVecEnv):
     envs: list[SingleAgentView]  # type: ignore[assignment]
 
     def __init__(
-        self, env_fns: Sequence[Callable[[], SingleAgentView]], exact: bool = True
+        self,
+        env_fns: Sequence[Callable[[], SingleAgentView]],
+        exact: bool = True,
+        array: bool = True,
     ) -> None:
         super().__init__(list(env_fns))
         self.exact = exact
@@ -87,7 +92,9 @@ class VectorView(DummyVecEnv):
         self._games = [view.game for view in self.envs]
         self._alike = lockstep.alike(self._games)  # else each game plays its own moves
         self._box = list(self.buf_obs) == [None]
-        self._array: ArrayPath | None = array_path(self.envs, exact)
+        self.array = array
+        """Whether the views may be played as one `ArrayGame`."""
+        self._array: ArrayPath | None = array_path(self.envs, exact) if array else None
         """The views as one `ArrayGame` where they can be (`advgame.core.vector_array`)."""
 
     def env_method(
@@ -102,7 +109,7 @@ class VectorView(DummyVecEnv):
             self._array.push()
             self._array = None
         out = super().env_method(method_name, *method_args, indices=indices, **method_kwargs)
-        if method_name == "set_policies":
+        if method_name == "set_policies" and self.array:
             self._array = array_path(self.envs, self.exact)
             if self._array is not None:
                 for i in range(self.num_envs):

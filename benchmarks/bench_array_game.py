@@ -1,0 +1,223 @@
+"""The array game beside SyncVectorEnv and EnvPool, and a single game beside the raw env, in one run.
+
+Part 1, N copies of a MuJoCo v5 task (``--env``, default HalfCheetah-v5) for N in ``--n``
+(default 1, 8, 64), random actions drawn before timing, every variant stepping the same actions:
+
+* ``sync``: Gymnasium's ``SyncVectorEnv`` of N ``gymnasium.make(env)`` over the raw task (1.00).
+* ``array-tK``: `advgame.core.array_game.ArrayGame` of N games of preset ``default`` with
+  uniformly random observation and action adversaries (a sense and an act call per step,
+  budgets checked, clips counted, finished copies reset), K simulator threads.
+* ``view-tK``: `advgame.core.vector.VectorView` of N protagonist views of the same games with
+  `RandomAdversary` policies embedded (what training steps; on the array game).
+* ``lockstep-tK``: the same `VectorView` on its lockstep path (``array=False``: before the array
+  game).
+* ``envpool-tK``: EnvPool's own ``<env>`` with K threads (absent unless ``import envpool`` works:
+  run the script from an environment that has it, e.g. one made with
+  ``python -m venv .venv-envpool`` layered over this one and ``pip install envpool``).
+
+Part 2, one copy (``--single``, default on): the raw env (``gymnasium.make``, its wrappers), a
+`Game` of preset ``default`` played through ``play`` (a sense and an act move, random
+adversaries), and the array game of one copy.
+
+The variants are interleaved for ``--rounds`` rounds of ``--chunk`` vector steps and each is
+compared with ``sync`` (or the raw env) of the same round. Printed: a calibration line
+(`benchmarks/calibrate.py`'s raw HalfCheetah step in µs, with the load average), then the
+median env-steps/s of the reference and the quartiles of each variant's per-round ratio to it.
+Run on quiet cores: ``python benchmarks/bench_array_game.py`` (``--env``, ``--n``, ``--threads``,
+``--rounds``, ``--chunk``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from _common import quartiles
+from calibrate import step_us
+
+import advgame
+from advgame.core.array_game import ArrayGame
+from advgame.core.physics import THREADS_VAR
+
+ADVERSARIES = ("observation_adversary", "action_adversary")
+
+
+class _Array:
+    """An `ArrayGame` of preset ``default`` whose adversaries draw uniform actions."""
+
+    def __init__(self, env_id: str, n: int, threads: int) -> None:
+        self.game = ArrayGame(
+            [advgame.make(env_id, preset="default") for _ in range(n)], threads=threads
+        )
+        self.rng = np.random.default_rng(1)
+        self.n = n
+
+    def reset(self, seed: int) -> None:
+        self.game.reset(seed=seed)
+
+    def step(self, actions: np.ndarray) -> None:
+        game, rng = self.game, self.rng
+        game.sense({"observation_adversary": rng.uniform(-1, 1, game.state().shape)})
+        game.act({"protagonist": actions, "action_adversary": rng.uniform(-1, 1, actions.shape)})
+        if game.done.any():
+            game.reset(rows=game.done)
+
+    def close(self) -> None:
+        self.game.close()
+
+
+class _View:
+    """`VectorView` of protagonist views with random adversaries, array or lockstep path."""
+
+    def __init__(self, env_id: str, n: int, threads: int, array: bool) -> None:
+        from advgame.adversaries import RandomAdversary
+        from advgame.core.vector import VectorView
+        from advgame.core.views import view_factory
+
+        policies = {a: RandomAdversary() for a in ADVERSARIES}
+        self.threads = str(threads)
+        fns = [view_factory(env_id, "protagonist", policies, preset="default")] * n
+        self.venv = VectorView(fns, array=array)
+        self.venv.seed(0)
+
+    def reset(self, seed: int) -> None:
+        self.venv.reset()
+
+    def step(self, actions: np.ndarray) -> None:
+        os.environ[THREADS_VAR] = self.threads  # the simulator threads of this variant
+        self.venv.step(actions)
+
+    def close(self) -> None:
+        self.venv.close()
+
+
+class _Single:
+    """One `Game` of preset ``default`` played move by move with random adversary actions."""
+
+    def __init__(self, env_id: str) -> None:
+        self.game = advgame.make(env_id, preset="default")
+        self.rng = np.random.default_rng(1)
+
+    def reset(self, seed: int) -> None:
+        self.game.reset(seed=seed)
+
+    def step(self, actions: np.ndarray) -> None:
+        game, rng = self.game, self.rng
+        a = actions[0]
+        game.play({"observation_adversary": rng.uniform(-1, 1, game.state().shape)})
+        move = game.play({"protagonist": a, "action_adversary": rng.uniform(-1, 1, a.shape)})
+        if move.terminated or move.truncated:
+            game.reset()
+
+    def close(self) -> None:
+        self.game.close()
+
+
+class _Raw:
+    """``gymnasium.make(env)`` stepped one action at a time."""
+
+    def __init__(self, env_id: str) -> None:
+        self.env = gym.make(env_id)
+
+    def reset(self, seed: int) -> None:
+        self.env.reset(seed=seed)
+
+    def step(self, actions: np.ndarray) -> None:
+        _, _, terminated, truncated, _ = self.env.step(actions[0])
+        if terminated or truncated:
+            self.env.reset()
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[], Any]]:
+    out: dict[str, Callable[[], Any]] = {
+        "sync": lambda: gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n)
+    }
+    for k in threads:
+        out[f"array-t{k}"] = lambda k=k: _Array(env_id, n, k)
+        if n > 1:
+            out[f"view-t{k}"] = lambda k=k: _View(env_id, n, k, array=True)
+            out[f"lockstep-t{k}"] = lambda k=k: _View(env_id, n, k, array=False)
+    try:
+        import envpool
+
+        for k in threads:
+            out[f"envpool-t{k}"] = lambda k=k: envpool.make_gymnasium(
+                env_id, num_envs=n, num_threads=k, seed=0
+            )
+    except ImportError:
+        print("envpool is not importable here: its columns are skipped (see the docstring)")
+    return out
+
+
+def measure(
+    variants: dict[str, Callable[[], Any]], env_id: str, n: int, rounds: int, chunk: int
+) -> dict[str, list[float]]:
+    """Env-steps/s of every variant per round, interleaved."""
+    space = gym.make(env_id).action_space
+    actions = np.random.default_rng(0).uniform(space.low, space.high, (chunk, n, *space.shape))
+    envs = {name: make() for name, make in variants.items()}
+    for name, env in envs.items():
+        if name.startswith("envpool"):
+            env.reset()  # seeded at construction
+        else:
+            env.reset(seed=0)
+    rates: dict[str, list[float]] = {name: [] for name in envs}
+    for _ in range(rounds):
+        for name, env in envs.items():
+            acts = actions.astype(np.float64 if name.startswith("envpool") else np.float32)
+            start = time.perf_counter()
+            for a in acts:
+                env.step(a)
+            rates[name].append(chunk * n / (time.perf_counter() - start))
+    for env in envs.values():
+        env.close()
+    return rates
+
+
+def _row(label: str, rates: dict[str, list[float]], base: str) -> str:
+    cells = [
+        quartiles([v / s for v, s in zip(values, rates[base], strict=True)])
+        for key, values in rates.items()
+        if key != base
+    ]
+    return f"| {label} | {statistics.median(rates[base]):.0f} | " + " | ".join(cells) + " |"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", default="HalfCheetah-v5")
+    parser.add_argument("--n", default="1,8,64")
+    parser.add_argument("--threads", default="1,2")
+    parser.add_argument("--rounds", type=int, default=15)
+    parser.add_argument("--chunk", type=int, default=50, help="vector steps per segment")
+    parser.add_argument("--no-single", dest="single", action="store_false")
+    args = parser.parse_args()
+    load = os.getloadavg()[0]
+    print(f"calibration: raw HalfCheetah-v5 step {step_us(5_000, 3):.1f} µs (load {load:.2f})")
+    threads = [int(k) for k in args.threads.split(",")]
+    for n in (int(x) for x in args.n.split(",")):
+        rates = measure(_variants(args.env, n, threads), args.env, n, args.rounds, args.chunk)
+        print(f"| {args.env} N | sync steps/s | " + " | ".join(k for k in rates if k != "sync"))
+        print(_row(str(n), rates, "sync"))
+    if args.single:
+        single = {
+            "raw": lambda: _Raw(args.env),
+            "game": lambda: _Single(args.env),
+            "array-1": lambda: _Array(args.env, 1, 1),
+        }
+        rates = measure(single, args.env, 1, args.rounds, args.chunk * 8)
+        print(f"| {args.env} single | raw steps/s | game | array of one |")
+        print(_row("1", rates, "raw"))
+
+
+if __name__ == "__main__":
+    main()
