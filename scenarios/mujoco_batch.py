@@ -78,26 +78,34 @@ def batched_step(
     wrong action shape): the caller then steps them one by one.
     """
     t0 = tasks[0]
-    env_id = t0.env.unwrapped.spec.id if t0.env.unwrapped.spec else None
-    key = (type(t0), env_id, repr(t0.env.spec.kwargs if t0.env.spec else None))
-    same = env_id in FORMULAS and all(
-        (
-            type(t),
-            t.env.unwrapped.spec.id if t.env.unwrapped.spec else None,
-            repr(t.env.spec.kwargs if t.env.spec else None),
-        )
-        == key
-        and t._inner is t.env.unwrapped
-        and t._inner.render_mode is None  # a rendering env draws inside its own step
-        for t in tasks
-    )
-    if not same or actions.shape != (len(tasks), t0._inner.model.nu):
+    key = _array_key(t0)
+    env_id = key[1]
+    if env_id not in FORMULAS or any(_array_key(t) != key for t in tasks):
+        return None
+    if actions.shape != (len(tasks), t0._inner.model.nu):
         return None
     envs = [t._inner for t in tasks]
     obs, reward, terminated, info = step_envs(
         envs, FORMULAS[env_id], actions, shared_stepper(threads)
     )
     return {GymTask.AGENT: obs}, reward, terminated, info
+
+
+def _array_key(task: Any) -> tuple[Any, ...]:
+    """What copies must share to step as one batch (task, keywords; ``None``: cannot batch).
+
+    Made once per task (its env does not change); a task with wrappers the game does not
+    replace, or one that renders, gets a key of its own.
+    """
+    key = task.__dict__.get("_array_key")
+    if key is None:
+        inner, spec = task.env.unwrapped, task.env.spec
+        plain = task._inner is inner and inner.render_mode is None
+        env_id = inner.spec.id if inner.spec else None
+        kwargs = repr(spec.kwargs if spec else None)
+        key = (type(task), env_id, kwargs) if plain else (id(task), None)
+        task._array_key = key
+    return key  # type: ignore[no-any-return]
 
 
 class BatchedMujocoEnv(VectorEnv):
