@@ -30,6 +30,7 @@ Run on quiet cores: ``python benchmarks/bench_array_game.py`` (``--env``, ``--n`
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import statistics
 import time
@@ -142,16 +143,16 @@ def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[],
         "sync": lambda: gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n)
     }
     for k in threads:
-        out[f"array-t{k}"] = lambda k=k: _Array(env_id, n, k)
+        out[f"array-t{k}"] = functools.partial(_Array, env_id, n, k)
         if n > 1:
-            out[f"view-t{k}"] = lambda k=k: _View(env_id, n, k, array=True)
-            out[f"lockstep-t{k}"] = lambda k=k: _View(env_id, n, k, array=False)
+            out[f"view-t{k}"] = functools.partial(_View, env_id, n, k, array=True)
+            out[f"lockstep-t{k}"] = functools.partial(_View, env_id, n, k, array=False)
     try:
         import envpool
 
         for k in threads:
-            out[f"envpool-t{k}"] = lambda k=k: envpool.make_gymnasium(
-                env_id, num_envs=n, num_threads=k, seed=0
+            out[f"envpool-t{k}"] = functools.partial(
+                envpool.make_gymnasium, env_id, num_envs=n, num_threads=k, seed=0
             )
     except ImportError:
         print("envpool is not importable here: its columns are skipped (see the docstring)")
@@ -163,6 +164,7 @@ def measure(
 ) -> dict[str, list[float]]:
     """Env-steps/s of every variant per round, interleaved."""
     space = gym.make(env_id).action_space
+    assert isinstance(space, gym.spaces.Box)
     actions = np.random.default_rng(0).uniform(space.low, space.high, (chunk, n, *space.shape))
     envs = {name: make() for name, make in variants.items()}
     for name, env in envs.items():

@@ -42,7 +42,7 @@ def _force(array: bool) -> None:
     def init(self: Any, env_fns: Any, exact: bool = True, array_: bool = array) -> None:
         _INIT(self, env_fns, exact, array=array_)
 
-    vector.VectorView.__init__ = init  # type: ignore[method-assign]
+    vector.VectorView.__init__ = init  # type: ignore[method-assign,assignment]
 
 
 def iteration(out: Path, n_envs: int, seed: int, array: bool) -> float:

@@ -97,7 +97,7 @@ def _array_key(task: Any) -> tuple[Any, ...]:
     Made once per task (its env does not change); a task with wrappers the game does not
     replace, or one that renders, gets a key of its own.
     """
-    key = task.__dict__.get("_array_key")
+    key: tuple[Any, ...] | None = task.__dict__.get("_array_key")
     if key is None:
         inner, spec = task.env.unwrapped, task.env.spec
         plain = task._inner is inner and inner.render_mode is None
@@ -105,7 +105,7 @@ def _array_key(task: Any) -> tuple[Any, ...]:
         kwargs = repr(spec.kwargs if spec else None)
         key = (type(task), env_id, kwargs) if plain else (id(task), None)
         task._array_key = key
-    return key  # type: ignore[no-any-return]
+    return key
 
 
 class BatchedMujocoEnv(VectorEnv):

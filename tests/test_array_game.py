@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from gymnasium.spaces import Box
 
 import advgame
 from advgame.core.array_game import ArrayGame, ArrayStep, unsupported
@@ -34,6 +35,7 @@ SAFE = advgame.list_scenarios(family="safe")
 
 def _box(game: advgame.Game, agent: str, rng: np.random.Generator) -> np.ndarray:
     space = game.action_space(agent)
+    assert isinstance(space, Box)
     if agent in game.protagonists:
         return rng.uniform(space.low, space.high, (N, *space.shape)).astype(space.dtype)
     return rng.uniform(-1.25, 1.25, (N, *space.shape))  # some components clip

@@ -208,6 +208,7 @@ class ArrayGame:
         for p in self.protagonists:
             if p not in self._true:
                 space = g.observation_space(p)
+                assert isinstance(space, spaces.Box)  # `unsupported` checked it
                 self._true[p] = np.zeros((self.n, *space.shape), space.dtype)
                 self._shown[p] = self._true[p].copy()
             self._true[p][i] = g._true_obs[p]

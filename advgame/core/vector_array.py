@@ -104,7 +104,7 @@ class ArrayPath:
 
     def _ask(self, agents: Sequence[str], live: np.ndarray | None = None) -> dict[str, Any]:
         """The embedded policies' actions of `agents` for the copies where each moves."""
-        game, out = self.game, {}
+        game, out = self.game, dict[str, Any]()
         for a in agents:
             if a == self.agent:
                 continue
@@ -121,8 +121,8 @@ class ArrayPath:
             if len(idx) == game.n:
                 out[a] = answers
                 continue
-            space = game.games[0].action_space(a)
-            full = np.zeros((game.n, *space.shape), np.float64)
+            shape = game.games[0].action_space(a).shape or ()
+            full = np.zeros((game.n, *shape), np.float64)
             full[idx] = np.asarray(answers, np.float64)
             out[a] = full
         return out
