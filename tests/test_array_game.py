@@ -177,3 +177,35 @@ def test_refuses_what_it_cannot_play() -> None:
         array.sense({"observation_adversary": np.zeros((3, 11))})
     with pytest.raises(ActionError, match="Copy 1"):
         array.sense({"observation_adversary": np.array([np.zeros(11), np.full(11, np.nan)])})
+
+
+def test_vector_view_swaps_policies_mid_episode() -> None:
+    """New embedded policies mid-episode (the alternation loop's swap) keep every step exact."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from advgame.adversaries import ConstantAdversary, GaussianAdversary
+    from advgame.core.vector import VectorView
+    from advgame.core.views import view_factory
+
+    noise = {"observation_adversary": GaussianAdversary(std=0.05)}
+    fns = [view_factory("Hopper-v5", "protagonist", noise, preset="default")] * N
+    array, dummy = VectorView(fns), DummyVecEnv(fns)
+    assert array._array is not None
+    array.seed(3)
+    dummy.seed(3)
+    np.testing.assert_array_equal(array.reset(), dummy.reset())
+    rng = np.random.default_rng(0)
+    for k in range(60):
+        if k == 20:  # swap, then continue on the lockstep-free array path again
+            new = {"action_adversary": ConstantAdversary([0.05, -0.2, 0.1])}  # clips
+            array.env_method("set_policies", new)
+            dummy.env_method("set_policies", new)
+            assert array._array is not None
+        actions = rng.uniform(-1, 1, (N, 3)).astype(np.float32)
+        a, b = array.step(actions), dummy.step(actions)
+        for x, y in zip(a[:3], b[:3], strict=True):
+            np.testing.assert_array_equal(x, y)
+        for ia, ib in zip(a[3], b[3], strict=True):
+            assert ia.keys() == ib.keys()
+            for key in ia:
+                np.testing.assert_array_equal(ia[key], ib[key], err_msg=key)

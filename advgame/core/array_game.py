@@ -227,6 +227,8 @@ class ArrayGame:
 
         `sensed`: whether this step's sense move was made (the game is then at its act move).
         """
+        if not self._true:  # never reset or read: the game holds its own state
+            return
         g = self.games[i]
         g._true_obs = {p: self._true[p][i].copy() for p in self.protagonists}
         g._shown = {p: self._shown[p][i].copy() for p in self.protagonists}
