@@ -204,6 +204,8 @@ class ArrayGame:
         moves before the learner's first decision); the array game then goes on from there.
         """
         g = self.games[i]
+        if not g._true_obs:  # never reset: nothing to read (the copy stays `done`)
+            return
         self._rngs[i] = g._rng
         for p in self.protagonists:
             if p not in self._true:
