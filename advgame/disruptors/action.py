@@ -23,6 +23,7 @@ from advgame.core.disruptor import (
     DisruptorSpec,
     as_budget,
     budget_array,
+    clip_ufunc,
     resolve_targets,
 )
 from advgame.errors import BudgetError, ConfigError
@@ -188,8 +189,8 @@ class ActionRuntime(AdditiveDisruptor):
                     new = (1.0 - self.alpha) * a + self.alpha * adv
                 else:
                     new = adv if rng.random() < self.alpha else a
-            # = np.clip(new, space.low, space.high), with less dispatch
-            actions[t] = new.clip(*bounds).astype(space.dtype)
+            # = np.clip(new, space.low, space.high): its ufunc, without the Python wrapper
+            actions[t] = clip_ufunc(new, *bounds).astype(space.dtype)
 
     def action_rows(
         self,
