@@ -15,14 +15,19 @@ Part 1, N copies of a MuJoCo v5 task (``--env``, default HalfCheetah-v5) for N i
   run the script from an environment that has it, e.g. one made with
   ``python -m venv .venv-envpool`` layered over this one and ``pip install envpool``).
 
-Part 2, one copy (``--single``, default on): the raw env (``gymnasium.make``, its wrappers), a
-`Game` of preset ``default`` played through ``play`` (a sense and an act move, random
-adversaries), and the array game of one copy.
+Part 2, one copy (on unless ``--no-single``; ``--single-only`` skips part 1): the raw env
+(``gymnasium.make``, its wrappers), a `Game` of preset ``default`` played through ``play`` (a
+sense and an act move) and through ``step`` (the ParallelEnv form: every agent's action in,
+five per-agent dicts out), and the array game of one copy; the adversaries' uniform actions are
+drawn before timing, as the protagonist's are.
 
 The variants are interleaved for ``--rounds`` rounds of ``--chunk`` vector steps and each is
 compared with ``sync`` (or the raw env) of the same round. Printed: a calibration line
 (`benchmarks/calibrate.py`'s raw HalfCheetah step in µs, with the load average), then the
-median env-steps/s of the reference and the quartiles of each variant's per-round ratio to it.
+median env-steps/s of the reference and the quartiles of each variant's per-round ratio to it,
+and for part 2 a second calibration line after it. ``--clock cpu`` times in the process's CPU
+time instead of wall time: on shared, loaded cores the ratios are then less noisy (time spent
+descheduled does not count), but caches are still shared, so they remain indications.
 Run on quiet cores: ``python benchmarks/bench_array_game.py`` (``--env``, ``--n``, ``--threads``,
 ``--rounds``, ``--chunk``).
 """
@@ -99,21 +104,40 @@ class _View:
 
 
 class _Single:
-    """One `Game` of preset ``default`` played move by move with random adversary actions."""
+    """One `Game` of preset ``default`` played move by move (`Game.play`, or `Game.step`).
 
-    def __init__(self, env_id: str) -> None:
+    The adversaries' uniform actions are drawn before timing (a pool cycled through), as the
+    protagonist's are, so the ratio to the raw env is the game's own cost, not a policy's.
+    """
+
+    def __init__(self, env_id: str, pettingzoo: bool = False) -> None:
         self.game = advgame.make(env_id, preset="default")
-        self.rng = np.random.default_rng(1)
+        rng = np.random.default_rng(1)
+        sizes = {a: self.game.action_space(a).shape for a in ADVERSARIES}
+        self.pool = [
+            {a: rng.uniform(-1, 1, shape) for a, shape in sizes.items()} for _ in range(997)
+        ]
+        self.i = 0
+        self.pettingzoo = pettingzoo
 
     def reset(self, seed: int) -> None:
         self.game.reset(seed=seed)
 
     def step(self, actions: np.ndarray) -> None:
-        game, rng = self.game, self.rng
-        a = actions[0]
-        game.play({"observation_adversary": rng.uniform(-1, 1, game.state().shape)})
-        move = game.play({"protagonist": a, "action_adversary": rng.uniform(-1, 1, a.shape)})
-        if move.terminated or move.truncated:
+        game, drawn = self.game, self.pool[self.i]
+        self.i = (self.i + 1) % len(self.pool)
+        if self.pettingzoo:  # the ParallelEnv form: every agent's action, five dicts back
+            acts = {"protagonist": actions[0], **drawn}
+            game.step(acts)
+            game.step(acts)
+            ended = not game.agents
+        else:
+            game.play({"observation_adversary": drawn["observation_adversary"]})
+            move = game.play(
+                {"protagonist": actions[0], "action_adversary": drawn["action_adversary"]}
+            )
+            ended = move.terminated or move.truncated
+        if ended:
             game.reset()
 
     def close(self) -> None:
@@ -160,9 +184,14 @@ def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[],
 
 
 def measure(
-    variants: dict[str, Callable[[], Any]], env_id: str, n: int, rounds: int, chunk: int
+    variants: dict[str, Callable[[], Any]],
+    env_id: str,
+    n: int,
+    rounds: int,
+    chunk: int,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> dict[str, list[float]]:
-    """Env-steps/s of every variant per round, interleaved."""
+    """Env-steps/s of every variant per round, interleaved, timed by `clock`."""
     space = gym.make(env_id).action_space
     assert isinstance(space, gym.spaces.Box)
     actions = np.random.default_rng(0).uniform(space.low, space.high, (chunk, n, *space.shape))
@@ -176,10 +205,10 @@ def measure(
     for _ in range(rounds):
         for name, env in envs.items():
             acts = actions.astype(np.float64 if name.startswith("envpool") else np.float32)
-            start = time.perf_counter()
+            start = clock()
             for a in acts:
                 env.step(a)
-            rates[name].append(chunk * n / (time.perf_counter() - start))
+            rates[name].append(chunk * n / (clock() - start))
     for env in envs.values():
         env.close()
     return rates
@@ -202,23 +231,48 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=15)
     parser.add_argument("--chunk", type=int, default=50, help="vector steps per segment")
     parser.add_argument("--no-single", dest="single", action="store_false")
+    parser.add_argument(
+        "--single-only", action="store_true", help="only part 2, the single game vs the raw env"
+    )
+    parser.add_argument(
+        "--clock",
+        choices=("wall", "cpu"),
+        default="wall",
+        help="wall time, or the process's CPU time (on loaded cores: time spent descheduled "
+        "does not count, though caches are still shared)",
+    )
     args = parser.parse_args()
-    load = os.getloadavg()[0]
-    print(f"calibration: raw HalfCheetah-v5 step {step_us(5_000, 3):.1f} µs (load {load:.2f})")
+    clock = time.process_time if args.clock == "cpu" else time.perf_counter
     threads = [int(k) for k in args.threads.split(",")]
-    for n in (int(x) for x in args.n.split(",")):
-        rates = measure(_variants(args.env, n, threads), args.env, n, args.rounds, args.chunk)
+    _calibrate(args.clock)
+    for n in [] if args.single_only else [int(x) for x in args.n.split(",")]:
+        rates = measure(
+            _variants(args.env, n, threads), args.env, n, args.rounds, args.chunk, clock
+        )
         print(f"| {args.env} N | sync steps/s | " + " | ".join(k for k in rates if k != "sync"))
         print(_row(str(n), rates, "sync"))
-    if args.single:
+    if args.single or args.single_only:
         single = {
             "raw": lambda: _Raw(args.env),
             "game": lambda: _Single(args.env),
+            "parallel-env": lambda: _Single(args.env, pettingzoo=True),
             "array-1": lambda: _Array(args.env, 1, 1),
         }
-        rates = measure(single, args.env, 1, args.rounds, args.chunk * 8)
-        print(f"| {args.env} single | raw steps/s | game | array of one |")
+        rates = measure(single, args.env, 1, args.rounds, args.chunk * 8, clock)
+        _calibrate(args.clock)  # the load may have moved during the run: before and after
+        print(
+            f"| {args.env} single ({args.clock} time) | raw steps/s | game (`play`) "
+            "| ParallelEnv (`step`) | array game of one |"
+        )
         print(_row("1", rates, "raw"))
+
+
+def _calibrate(clock: str) -> None:
+    load = os.getloadavg()[0]
+    print(
+        f"calibration: raw HalfCheetah-v5 step {step_us(5_000, 3):.1f} µs wall "
+        f"(load {load:.2f}; this run times in {clock} time)"
+    )
 
 
 if __name__ == "__main__":
