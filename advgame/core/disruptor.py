@@ -25,6 +25,7 @@ import numpy as np
 from gymnasium import spaces
 
 from advgame.core.array_hooks import ArrayHooks
+from advgame.core.checks import SMALL, all_finite, clip_ufunc, in_unit_box
 from advgame.core.fields import check_fields
 from advgame.core.schedule import Schedule
 from advgame.errors import ActionError, BudgetError, UnknownNameError, did_you_mean
@@ -33,6 +34,7 @@ if TYPE_CHECKING:
     from advgame.core.task import MujocoSim, TaskBase
 
 __all__ = [
+    "SMALL",
     "AdditiveDisruptor",
     "Disruptor",
     "DisruptorSpec",
@@ -46,38 +48,6 @@ __all__ = [
 ]
 
 Hook = Literal["observation", "action", "reward", "environment"]
-
-
-clip_ufunc: np.ufunc = np.core.umath.clip  # type: ignore[attr-defined]  # not in numpy's stubs
-"""The ufunc behind `np.clip` and `ndarray.clip` (same loops, same results) without their
-Python wrapper, which costs more than the clip of one action."""
-
-SMALL = 64
-"""Up to this many entries, Python's ``sum(a.tolist())`` beats a numpy reduction."""
-
-
-def all_finite(a: np.ndarray) -> bool:
-    """Whether every entry of the real array `a` is finite; one cheap pass when it is.
-
-    NaN or inf makes the sum (of the entries, or of their squares) non-finite; so can an
-    overflow of finite values, which the exact test then settles.
-    """
-    flat = a if a.ndim == 1 else a.reshape(-1)
-    total = sum(flat.tolist()) if flat.size <= SMALL else flat.dot(flat)
-    return math.isfinite(total) or bool(np.isfinite(a).all())
-
-
-def in_unit_box(u: np.ndarray) -> bool:
-    """Whether every entry of the float array `u` (any shape) lies in ``[-1, 1]`` (NaN does not).
-
-    One action (up to `SMALL` entries) is tested in Python: a numpy reduction costs about as
-    much as the simulator's own Python per step. `min` and `max` skip a NaN that is not first,
-    so the sum (NaN if any entry is) settles it.
-    """
-    if u.ndim == 1 and 0 < u.size <= SMALL:
-        flat = u.tolist()
-        return min(flat) >= -1.0 and max(flat) <= 1.0 and math.isfinite(sum(flat))
-    return bool(np.maximum.reduce(np.abs(u), axis=None, initial=0.0) <= 1.0)  # NaN: False
 
 
 def budget_array(value: Any, what: str) -> np.ndarray:

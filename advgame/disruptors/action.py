@@ -17,13 +17,13 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.checks import clip_ufunc
 from advgame.core.disruptor import (
     AdditiveDisruptor,
     Disruptor,
     DisruptorSpec,
     as_budget,
     budget_array,
-    clip_ufunc,
     resolve_targets,
 )
 from advgame.errors import BudgetError, ConfigError
