@@ -36,11 +36,11 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from advgame.core.physics import ThreadedStepper, shared_stepper
-from advgame.core.task import GymTask, StepResult
+from advgame.core.task import ArrayResult, GymTask, StepResult
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 from advgame.scenarios.mujoco_formulas import FORMULAS, Formula, Outcome, Stacked
 
-__all__ = ["TASKS", "BatchedGymTask", "BatchedMujocoEnv", "step_envs"]
+__all__ = ["TASKS", "BatchedGymTask", "BatchedMujocoEnv", "batched_step", "step_envs"]
 
 TASKS = tuple(FORMULAS)
 """The task ids a `BatchedMujocoEnv` can batch."""
@@ -66,6 +66,46 @@ def step_envs(
     dt = np.array([e.dt for e in envs])
     stepper.step(envs, actions, env.frame_skip, formula.contact_forces)
     return formula.after(Stacked(envs), env, before, actions, dt)
+
+
+def batched_step(
+    tasks: Any, actions: np.ndarray, threads: int | None = None
+) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, dict[str, Any]] | None:
+    """Step the unwrapped envs of `GymTask` copies of one MuJoCo v5 task as one batch.
+
+    Returns ``({"protagonist": obs}, rewards, terminations, infos)`` over ``[N, ...]``, or
+    None when the copies cannot batch (another task or keywords, extra wrappers, rendering, a
+    wrong action shape): the caller then steps them one by one.
+    """
+    t0 = tasks[0]
+    key = _array_key(t0)
+    env_id = key[1]
+    if env_id not in FORMULAS or any(_array_key(t) != key for t in tasks):
+        return None
+    if actions.shape != (len(tasks), t0._inner.model.nu):
+        return None
+    envs = [t._inner for t in tasks]
+    obs, reward, terminated, info = step_envs(
+        envs, FORMULAS[env_id], actions, shared_stepper(threads)
+    )
+    return {GymTask.AGENT: obs}, reward, terminated, info
+
+
+def _array_key(task: Any) -> tuple[Any, ...]:
+    """What copies must share to step as one batch (task, keywords; ``None``: cannot batch).
+
+    Made once per task (its env does not change); a task with wrappers the game does not
+    replace, or one that renders, gets a key of its own.
+    """
+    key: tuple[Any, ...] | None = task.__dict__.get("_array_key")
+    if key is None:
+        inner, spec = task.env.unwrapped, task.env.spec
+        plain = task._inner is inner and inner.render_mode is None
+        env_id = inner.spec.id if inner.spec else None
+        kwargs = repr(spec.kwargs if spec else None)
+        key = (type(task), env_id, kwargs) if plain else (id(task), None)
+        task._array_key = key
+    return key
 
 
 class BatchedMujocoEnv(VectorEnv):
@@ -293,3 +333,17 @@ class BatchedGymTask(GymTask):
             t._result(obs[i], reward[i], terminated[i], False, {k: v[i] for k, v in info.items()})
             for i, t in enumerate(tasks)
         ]
+
+    batched = True
+
+    @classmethod
+    def step_arrays(cls, tasks: Any, actions: Any, threads: int | None = None) -> ArrayResult:
+        """Step N copies as one batch (`batched_step`); one by one where they cannot batch."""
+        stepped = batched_step(tasks, np.asarray(actions[cls.AGENT]), threads)
+        if stepped is None:
+            return super().step_arrays(tasks, actions, threads)
+        obs, reward, terminated, info = stepped
+        n = len(tasks)
+        cost_key = tasks[0].cost_key
+        cost = np.asarray(info[cost_key], np.float64) if cost_key in info else np.zeros(n)
+        return ArrayResult(obs, reward, cost, terminated, np.zeros(n, np.bool_), info)

@@ -27,7 +27,7 @@ force), and the paper's random-mode settings ``action-gauss-0.15``, ``action-gau
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +35,7 @@ import numpy as np
 
 from advgame.adversaries import GaussianAdversary
 from advgame.core.registry import Preset
-from advgame.core.task import GymTask, StepResult
+from advgame.core.task import ArrayResult, GymTask, StepResult
 from advgame.disruptors import (
     ActionDisruptor,
     ForceDisruptor,
@@ -192,6 +192,29 @@ class SafetyTask(GymTask):
         info = {**info, "constraint_value": value}
         cost = float(value > self.constraint.threshold)
         return obs, reward, cost, terminated, truncated, info
+
+    batched = True
+
+    @classmethod
+    def step_arrays(
+        cls, tasks: Sequence[Any], actions: Mapping[str, Any], threads: int | None = None
+    ) -> ArrayResult:
+        """Step N copies as one batch of MuJoCo steps, each copy's cost as `step` computes it."""
+        from advgame.scenarios.mujoco_batch import batched_step
+
+        t0 = tasks[0]
+        if any(t.constraint != t0.constraint for t in tasks):
+            return super().step_arrays(tasks, actions, threads)
+        before = [t._point() for t in tasks]
+        stepped = batched_step(tasks, np.asarray(actions[cls.AGENT]), threads)
+        if stepped is None:
+            return super().step_arrays(tasks, actions, threads)
+        obs, reward, terminated, info = stepped
+        values = np.array([t.measure(b, t._point()) for t, b in zip(tasks, before, strict=True)])
+        info = {**info, "constraint_value": values}
+        cost = (values > t0.constraint.threshold).astype(np.float64)
+        n = len(tasks)
+        return ArrayResult(obs, reward, cost, terminated, np.zeros(n, np.bool_), info)
 
 
 def make_task(env_id: str, **kwargs: Any) -> SafetyTask:

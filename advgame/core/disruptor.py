@@ -24,6 +24,8 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.array_hooks import ArrayHooks
+from advgame.core.checks import SMALL, all_finite, clip_ufunc, in_unit_box
 from advgame.core.fields import check_fields
 from advgame.core.schedule import Schedule
 from advgame.errors import ActionError, BudgetError, UnknownNameError, did_you_mean
@@ -32,6 +34,7 @@ if TYPE_CHECKING:
     from advgame.core.task import MujocoSim, TaskBase
 
 __all__ = [
+    "SMALL",
     "AdditiveDisruptor",
     "Disruptor",
     "DisruptorSpec",
@@ -39,31 +42,12 @@ __all__ = [
     "all_finite",
     "as_budget",
     "budget_array",
+    "clip_ufunc",
     "in_unit_box",
     "resolve_targets",
 ]
 
 Hook = Literal["observation", "action", "reward", "environment"]
-
-
-SMALL = 64
-"""Up to this many entries, Python's ``sum(a.tolist())`` beats a numpy reduction."""
-
-
-def all_finite(a: np.ndarray) -> bool:
-    """Whether every entry of the real array `a` is finite; one cheap pass when it is.
-
-    NaN or inf makes the sum (of the entries, or of their squares) non-finite; so can an
-    overflow of finite values, which the exact test then settles.
-    """
-    flat = a if a.ndim == 1 else a.reshape(-1)
-    total = sum(flat.tolist()) if flat.size <= SMALL else flat.dot(flat)
-    return math.isfinite(total) or bool(np.isfinite(a).all())
-
-
-def in_unit_box(u: np.ndarray) -> bool:
-    """Whether every entry of the float array `u` (any shape) lies in ``[-1, 1]`` (NaN does not)."""
-    return bool(np.maximum.reduce(np.abs(u), axis=None, initial=0.0) <= 1.0)  # NaN: False
 
 
 def budget_array(value: Any, what: str) -> np.ndarray:
@@ -154,7 +138,7 @@ class DisruptorSpec(abc.ABC):
         """Bind the spec to `task`, checking names and shapes against it."""
 
 
-class Disruptor(abc.ABC):
+class Disruptor(ArrayHooks, abc.ABC):
     """A disruptor bound to a task: the adversary's action space and one hook.
 
     Args:
@@ -185,6 +169,7 @@ class Disruptor(abc.ABC):
         self.bounded = bounded
         self.norm = norm
         self.blocks = tuple(blocks) if blocks is not None else (size,)
+        self._box = bounded and norm == "linf"  # an action inside [-1, 1] is decoded as it is
         bound = 1.0 if bounded else np.inf
         self.action_space = spaces.Box(-bound, bound, shape=(size,), dtype=np.float32)
         self.shape = (size,)
@@ -217,7 +202,9 @@ class Disruptor(abc.ABC):
                 f"Action for {self.agent!r} has shape {u.shape}; expected {self.shape} "
                 f"(its action space is {self.action_space})."
             )
-        if self._passes(u):  # the common case: finite and inside the box, nothing to clip
+        # the common case: finite and inside the box, nothing to clip (`_passes`, inlined for
+        # one action: it runs on every move of every game)
+        if (self._box and in_unit_box(u)) if self.bounded else all_finite(u):
             return u, 0
         return self._decode_slow(u)
 
@@ -250,10 +237,16 @@ class Disruptor(abc.ABC):
         """
         if not self.bounded:
             return all_finite(u)
-        return self.norm == "linf" and in_unit_box(u)
+        return self._box and in_unit_box(u)
 
     def _decode_slow(self, u: np.ndarray) -> tuple[np.ndarray, int]:
-        """The precise checks: raise on NaN/inf, clip and count, project L2 blocks."""
+        """The precise checks of `_clip`, its clips counted in ``clip_count``."""
+        u, clipped = self._clip(u)
+        self.clip_count += clipped
+        return u, clipped
+
+    def _clip(self, u: np.ndarray) -> tuple[np.ndarray, int]:
+        """Raise on NaN/inf, clip and count, project L2 blocks (``clip_count`` untouched)."""
         m = float(np.abs(u).max())  # one reduction: NaN and inf both fail `m <= bound`
         if not math.isfinite(m):
             raise ActionError(
@@ -269,7 +262,6 @@ class Disruptor(abc.ABC):
         if self.norm == "l2":
             u, projected = self._project_l2(u)
             clipped += projected
-        self.clip_count += clipped
         return u, clipped
 
     def _project_l2(self, u: np.ndarray) -> tuple[np.ndarray, int]:
@@ -315,7 +307,7 @@ class Disruptor(abc.ABC):
         """Change the simulator before it steps; `u` is None on a step the schedule skips."""
         raise NotImplementedError(f"{type(self).__name__} is not an environment disruptor.")
 
-    def restore(self, sim: MujocoSim) -> None:  # noqa: B027 - an optional hook, no-op by default
+    def restore(self, sim: MujocoSim) -> None:
         """Put every parameter this disruptor changed back to its nominal value."""
 
     # -- the hooks over N alike games (`advgame.core.lockstep`): row by row unless overridden --

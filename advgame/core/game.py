@@ -257,7 +257,8 @@ class Game(Moves, ParallelEnv):
         Same semantics as `step` without building the per-agent dicts; rollouts and
         single-agent views use it. Current observations: `observe`.
         """
-        self.require(actions.keys())
+        if not (self.agents and actions.keys() >= self.next_movers):
+            self.require(actions.keys())  # raises, and says why
         if self.move == SENSE:
             return self._sense(actions)
         return self._act(actions)

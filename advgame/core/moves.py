@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from gymnasium import spaces
 
-from advgame.core.disruptor import all_finite
+from advgame.core.checks import all_finite
 from advgame.errors import ActionError, did_you_mean
 
 if TYPE_CHECKING:

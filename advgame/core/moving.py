@@ -3,7 +3,7 @@
 `Moves` is the half of `advgame.core.game.Game` that runs one move of the Disrupted-MDP (see
 that module's docstring for the move protocol): `Game` builds the disruptor groups and the
 PettingZoo surface, and inherits these steps. `advgame.core.lockstep` steps many games in
-lockstep through the same methods (`_step_task`, `_begin_step`).
+lockstep through the same methods (`_after_task`, `_begin_step`).
 """
 
 from __future__ import annotations
@@ -109,26 +109,22 @@ class Moves:
     def _act(self, actions: Mapping[str, Any]) -> Move:
         used: dict[str, np.ndarray] = {}
         clipped: dict[str, int] = {}
-        active = self._active
+        active, last = self._active, self._last
         for d in self._act_ds:
             if active[d.agent]:
                 u, clipped[d.agent] = d.decode(actions[d.agent])
-                used[d.agent] = self._last[d.agent] = u
+                used[d.agent] = last[d.agent] = u
         acts: dict[str, Any] = {}
         for p, (space, shape) in self._p_spaces.items():
             acts[p] = protagonist_action(p, space, shape, actions[p])
         if self._env_ds:
             self._disrupt_environment(used)
         for d in self._action_ds:
-            v = self._effective(d, used)
+            v = used.get(d.agent)  # `_effective`, inlined: this runs on every act move
+            if v is None and d.schedule.hold:
+                v = last.get(d.agent)
             if v is not None:
                 d.action(acts, v, self._rng)
-        return self._step_task(acts, used, clipped)
-
-    def _step_task(
-        self, acts: dict[str, Any], used: dict[str, np.ndarray], clipped: dict[str, int]
-    ) -> Move:
-        """The rest of an act move once the (disrupted) protagonist actions are known."""
         return self._after_task(self.task.step(acts), used, clipped)
 
     def _after_task(

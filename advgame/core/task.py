@@ -10,18 +10,36 @@ from __future__ import annotations
 import abc
 import logging
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, ClassVar, NamedTuple
 
 import gymnasium as gym
+import numpy as np
 
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 
-__all__ = ["GymTask", "MujocoSim", "StepResult", "TaskBase"]
+__all__ = ["ArrayResult", "GymTask", "MujocoSim", "StepResult", "TaskBase"]
 
 log = logging.getLogger(__name__)
 
 StepResult = tuple[dict[str, Any], float, float, bool, bool, dict[str, Any]]
 """(observations, team reward, team cost, terminated, truncated, info) of one task step."""
+
+
+class ArrayResult(NamedTuple):
+    """One step of N copies of a task base (`TaskBase.step_arrays`), row ``i`` for copy ``i``."""
+
+    observations: dict[str, np.ndarray]
+    """Each protagonist's observations ``[N, ...]``."""
+    reward: np.ndarray
+    """Team rewards ``[N]`` (float64)."""
+    cost: np.ndarray
+    """Team costs ``[N]`` (float64)."""
+    terminated: np.ndarray
+    """``[N]`` bool."""
+    truncated: np.ndarray
+    """``[N]`` bool (the task's own limit; the array game adds the time limit)."""
+    info: dict[str, np.ndarray]
+    """The task's info terms every copy has, ``[N, ...]`` each."""
 
 
 class MujocoSim:
@@ -190,6 +208,42 @@ class TaskBase(abc.ABC):
         would, bit for bit.
         """
         return [t.step(a) for t, a in zip(tasks, actions, strict=True)]
+
+    batched: ClassVar[bool] = False
+    """Whether `step_arrays` steps the copies' simulators as one batch (else one by one)."""
+
+    @classmethod
+    def step_arrays(
+        cls,
+        tasks: Sequence[TaskBase],
+        actions: Mapping[str, np.ndarray],
+        threads: int | None = None,
+    ) -> ArrayResult:
+        """Step N alike tasks, ``actions[p][i]`` for copy ``i``, and stack what they return.
+
+        The array game (`advgame.core.array_game.ArrayGame`) calls it. This default steps the
+        copies one by one (`step_many`); a task base whose simulators batch overrides it and
+        sets `batched`, returning the same arrays bit for bit. `threads` caps the simulator
+        threads of a batched step.
+        """
+        n = len(tasks)
+        results = cls.step_many(tasks, [{p: a[i] for p, a in actions.items()} for i in range(n)])
+        obs = {p: np.stack([r[0][p] for r in results]) for p in results[0][0]}
+        info: dict[str, np.ndarray] = {}
+        for key in results[0][5]:
+            if all(key in r[5] for r in results):
+                try:
+                    info[key] = np.asarray([r[5][key] for r in results])
+                except ValueError:  # ragged: not an array term
+                    continue
+        return ArrayResult(
+            obs,
+            np.array([r[1] for r in results], np.float64),
+            np.array([r[2] for r in results], np.float64),
+            np.array([r[3] for r in results], np.bool_),
+            np.array([r[4] for r in results], np.bool_),
+            info,
+        )
 
     @abc.abstractmethod
     def state(self, observations: Mapping[str, Any]) -> Any:

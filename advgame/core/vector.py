@@ -36,6 +36,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from advgame.core import lockstep
 from advgame.core.game import Move
 from advgame.core.policy import act_batch
+from advgame.core.vector_array import ArrayPath, array_path
 from advgame.core.views import SingleAgentView
 from advgame.errors import ConfigError
 
@@ -50,6 +51,8 @@ class VectorView(DummyVecEnv):
             the same agent.
         exact: keep every episode bit for bit the one a single view plays (True); False lets
             a recurrent opponent's copies share one forward pass (`act_batch`'s ``exact``).
+        array: play the views as one `ArrayGame` where they allow it
+            (`advgame.core.vector_array`); False keeps the lockstep path (benchmarks).
 
     Example:
         >>> from advgame.adversaries import GaussianAdversary
@@ -66,7 +69,10 @@ class VectorView(DummyVecEnv):
     envs: list[SingleAgentView]  # type: ignore[assignment]
 
     def __init__(
-        self, env_fns: Sequence[Callable[[], SingleAgentView]], exact: bool = True
+        self,
+        env_fns: Sequence[Callable[[], SingleAgentView]],
+        exact: bool = True,
+        array: bool = True,
     ) -> None:
         super().__init__(list(env_fns))
         self.exact = exact
@@ -86,12 +92,49 @@ class VectorView(DummyVecEnv):
         self._games = [view.game for view in self.envs]
         self._alike = lockstep.alike(self._games)  # else each game plays its own moves
         self._box = list(self.buf_obs) == [None]
+        self.array = array
+        """Whether the views may be played as one `ArrayGame`."""
+        self._array: ArrayPath | None = array_path(self.envs, exact) if array else None
+        """The views as one `ArrayGame` where they can be (`advgame.core.vector_array`)."""
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any
+    ) -> list[Any]:
+        """`DummyVecEnv.env_method`; new embedded policies may change the path the views take.
+
+        A policy bound to its game (a white-box attack) cannot play on the array path: the
+        copies go back to their own games first (`ArrayPath.push`), and back again later.
+        """
+        if method_name == "set_policies" and self._array is not None:
+            self._array.push()
+            self._array = None
+        out = super().env_method(method_name, *method_args, indices=indices, **method_kwargs)
+        if method_name == "set_policies" and self.array:
+            self._array = array_path(self.envs, self.exact)
+            if self._array is not None:
+                for i in range(self.num_envs):
+                    self._array.pulled(i)
+        return out
+
+    def reset(self) -> Any:
+        """Reset every view (SB3's seeds and options), then let the array game read them."""
+        obs = super().reset()
+        for i in range(self.num_envs):
+            self.view_reset(i)
+        return obs
+
+    def view_reset(self, i: int) -> None:
+        """Hear that view `i` was reset on its own (the array path then reads its game)."""
+        if self._array is not None:
+            self._array.pulled(i)
 
     def step_wait(self) -> tuple[Any, np.ndarray, np.ndarray, list[dict]]:
         """Step every view with its action; autoreset finished views as `DummyVecEnv` does."""
         views = self.envs
         if len(views) == 1:  # one view: its own step is the lockstep of one
             return self._results([views[0].step(self.actions[0])])
+        if self._array is not None:
+            return self._results(self._array.step(self.actions))
         tallies: list[Any] = [None] * len(views)
         for idx in lockstep.groups(self._games, range(len(views))):
             for i, move in zip(idx, self._play(idx, self.actions), strict=True):
@@ -116,6 +159,7 @@ class VectorView(DummyVecEnv):
             if done:
                 info["terminal_observation"] = obs
                 obs, self.reset_infos[i] = view.reset()
+                self.view_reset(i)
             infos[i] = info
             if buf is not None:
                 buf[i] = obs
@@ -198,6 +242,7 @@ class GymVectorView(VectorEnv):
         rows = []
         for i, view in enumerate(self.vector.envs):
             obs, info = view.reset(seed=None if seeds is None else seeds[i], options=options)
+            self.vector.view_reset(i)
             rows.append(obs)
             infos = self._add_info(infos, info, i)
         return np.stack(rows), infos

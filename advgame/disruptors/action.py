@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.checks import clip_ufunc
 from advgame.core.disruptor import (
     AdditiveDisruptor,
     Disruptor,
@@ -188,8 +189,8 @@ class ActionRuntime(AdditiveDisruptor):
                     new = (1.0 - self.alpha) * a + self.alpha * adv
                 else:
                     new = adv if rng.random() < self.alpha else a
-            # = np.clip(new, space.low, space.high), with less dispatch
-            actions[t] = new.clip(*bounds).astype(space.dtype)
+            # = np.clip(new, space.low, space.high): its ufunc, without the Python wrapper
+            actions[t] = clip_ufunc(new, *bounds).astype(space.dtype)
 
     def action_rows(
         self,
@@ -220,6 +221,29 @@ class ActionRuntime(AdditiveDisruptor):
             new = new.clip(*bounds).astype(space.dtype)
             for acts, row in zip(actions, new, strict=True):
                 acts[t] = row
+
+    def action_array(
+        self, actions: dict[str, np.ndarray], u: np.ndarray, rngs: Sequence[np.random.Generator]
+    ) -> None:
+        """`action` of every row at once (additive and noisy modes on 1-D Boxes: no draws).
+
+        Each row gets exactly the single copy's value; the probabilistic mode and Discrete
+        actions draw from each copy's own generator, row by row.
+        """
+        if not self._flat:
+            super().action_array(actions, u, rngs)
+            return
+        for t, block, space, bounds in self._plan:
+            b = u if block is None else u[:, block]
+            a = actions[t]
+            if a.dtype.kind != "f" or a.dtype.itemsize > 8:  # as `action`: enters as float64
+                a = a.astype(np.float64)
+            if self.mode == "additive":
+                new = a + b * (self.unit if block is None else self.unit[block])
+            else:
+                adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
+                new = (1.0 - self.alpha) * a.astype(np.float64) + self.alpha * adv
+            actions[t] = new.clip(*bounds).astype(space.dtype)
 
 
 def _size(space: spaces.Box | spaces.Discrete) -> int:

@@ -314,6 +314,27 @@ class ObservationRuntime(AdditiveDisruptor):
             for obs, row in zip(observations, new, strict=True):
                 obs[t] = row
 
+    def observation_array(self, observations: dict[str, np.ndarray], u: np.ndarray) -> None:
+        """`observation` of every row at once: ``[M, dims]`` sums and clips per target.
+
+        Each row gets exactly the single copy's value (the same float64 sum, clip and cast);
+        Dict observations go row by row.
+        """
+        if self.plans or any(space is None or len(space.shape) != 1 for *_, space, _ in self._plan):
+            super().observation_array(observations, u)
+            return
+        delta = self.perturbation(u)
+        for t, block, full, space, bounds in self._plan:
+            assert space is not None  # no Dict plans (checked above)
+            d = delta if block is None else delta[:, block]
+            obs = observations[t]
+            if full:
+                new = obs + d
+            else:
+                new = np.array(obs, dtype=np.float64)
+                new[:, self.dims[t]] += d
+            observations[t] = _into(new, space, bounds)
+
 
 def _into(new: np.ndarray, space: spaces.Box, bounds: Bounds) -> np.ndarray:
     """Perturbed observations (float64) clipped into `space` (its `bounds`) and cast to its dtype."""

@@ -78,3 +78,12 @@ class RewardRuntime(AdditiveDisruptor):
         delta = self.perturbation(u)
         for i, t in enumerate(self.targets):
             signal[t] = signal[t] + float(delta[i])
+
+    def reward_array(
+        self, rewards: dict[str, np.ndarray], costs: dict[str, np.ndarray], u: np.ndarray
+    ) -> None:
+        """`reward` of every row at once: ``[M]`` float64 sums, as the single copy's float sums."""
+        signal = rewards if self.signal == "reward" else costs
+        delta = self.perturbation(u)
+        for i, t in enumerate(self.targets):
+            signal[t] = signal[t] + delta[:, i]

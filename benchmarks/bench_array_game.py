@@ -1,0 +1,279 @@
+"""The array game beside SyncVectorEnv and EnvPool, and a single game beside the raw env, in one run.
+
+Part 1, N copies of a MuJoCo v5 task (``--env``, default HalfCheetah-v5) for N in ``--n``
+(default 1, 8, 64), random actions drawn before timing, every variant stepping the same actions:
+
+* ``sync``: Gymnasium's ``SyncVectorEnv`` of N ``gymnasium.make(env)`` over the raw task (1.00).
+* ``array-tK``: `advgame.core.array_game.ArrayGame` of N games of preset ``default`` with
+  uniformly random observation and action adversaries (a sense and an act call per step,
+  budgets checked, clips counted, finished copies reset), K simulator threads.
+* ``view-tK``: `advgame.core.vector.VectorView` of N protagonist views of the same games with
+  `RandomAdversary` policies embedded (what training steps; on the array game).
+* ``lockstep-tK``: the same `VectorView` on its lockstep path (``array=False``: before the array
+  game).
+* ``envpool-tK``: EnvPool's own ``<env>`` with K threads (absent unless ``import envpool`` works:
+  run the script from an environment that has it, e.g. one made with
+  ``python -m venv .venv-envpool`` layered over this one and ``pip install envpool``).
+
+Part 2, one copy (on unless ``--no-single``; ``--single-only`` skips part 1): the raw env
+(``gymnasium.make``, its wrappers), a `Game` of preset ``default`` played through ``play`` (a
+sense and an act move) and through ``step`` (the ParallelEnv form: every agent's action in,
+five per-agent dicts out), and the array game of one copy; the adversaries' uniform actions are
+drawn before timing, as the protagonist's are.
+
+The variants are interleaved for ``--rounds`` rounds of ``--chunk`` vector steps and each is
+compared with ``sync`` (or the raw env) of the same round. Printed: a calibration line
+(`benchmarks/calibrate.py`'s raw HalfCheetah step in µs, with the load average), then the
+median env-steps/s of the reference and the quartiles of each variant's per-round ratio to it,
+and for part 2 a second calibration line after it. ``--clock cpu`` times in the process's CPU
+time instead of wall time: on shared, loaded cores the ratios are then less noisy (time spent
+descheduled does not count), but caches are still shared, so they remain indications.
+Run on quiet cores: ``python benchmarks/bench_array_game.py`` (``--env``, ``--n``, ``--threads``,
+``--rounds``, ``--chunk``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import os
+import statistics
+import time
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from _common import quartiles
+from calibrate import step_us
+
+import advgame
+from advgame.core.array_game import ArrayGame
+from advgame.core.physics import THREADS_VAR
+
+ADVERSARIES = ("observation_adversary", "action_adversary")
+
+
+class _Array:
+    """An `ArrayGame` of preset ``default`` whose adversaries draw uniform actions."""
+
+    def __init__(self, env_id: str, n: int, threads: int) -> None:
+        self.game = ArrayGame(
+            [advgame.make(env_id, preset="default") for _ in range(n)], threads=threads
+        )
+        self.rng = np.random.default_rng(1)
+        self.n = n
+
+    def reset(self, seed: int) -> None:
+        self.game.reset(seed=seed)
+
+    def step(self, actions: np.ndarray) -> None:
+        game, rng = self.game, self.rng
+        game.sense({"observation_adversary": rng.uniform(-1, 1, game.state().shape)})
+        game.act({"protagonist": actions, "action_adversary": rng.uniform(-1, 1, actions.shape)})
+        if game.done.any():
+            game.reset(rows=game.done)
+
+    def close(self) -> None:
+        self.game.close()
+
+
+class _View:
+    """`VectorView` of protagonist views with random adversaries, array or lockstep path."""
+
+    def __init__(self, env_id: str, n: int, threads: int, array: bool) -> None:
+        from advgame.adversaries import RandomAdversary
+        from advgame.core.vector import VectorView
+        from advgame.core.views import view_factory
+
+        policies = {a: RandomAdversary() for a in ADVERSARIES}
+        self.threads = str(threads)
+        fns = [view_factory(env_id, "protagonist", policies, preset="default")] * n
+        self.venv = VectorView(fns, array=array)
+        self.venv.seed(0)
+
+    def reset(self, seed: int) -> None:
+        self.venv.reset()
+
+    def step(self, actions: np.ndarray) -> None:
+        os.environ[THREADS_VAR] = self.threads  # the simulator threads of this variant
+        self.venv.step(actions)
+
+    def close(self) -> None:
+        self.venv.close()
+
+
+class _Single:
+    """One `Game` of preset ``default`` played move by move (`Game.play`, or `Game.step`).
+
+    The adversaries' uniform actions are drawn before timing (a pool cycled through), as the
+    protagonist's are, so the ratio to the raw env is the game's own cost, not a policy's.
+    """
+
+    def __init__(self, env_id: str, pettingzoo: bool = False) -> None:
+        self.game = advgame.make(env_id, preset="default")
+        rng = np.random.default_rng(1)
+        sizes = {a: self.game.action_space(a).shape for a in ADVERSARIES}
+        self.pool = [
+            {a: rng.uniform(-1, 1, shape) for a, shape in sizes.items()} for _ in range(997)
+        ]
+        self.i = 0
+        self.pettingzoo = pettingzoo
+
+    def reset(self, seed: int) -> None:
+        self.game.reset(seed=seed)
+
+    def step(self, actions: np.ndarray) -> None:
+        game, drawn = self.game, self.pool[self.i]
+        self.i = (self.i + 1) % len(self.pool)
+        if self.pettingzoo:  # the ParallelEnv form: every agent's action, five dicts back
+            acts = {"protagonist": actions[0], **drawn}
+            game.step(acts)
+            game.step(acts)
+            ended = not game.agents
+        else:
+            game.play({"observation_adversary": drawn["observation_adversary"]})
+            move = game.play(
+                {"protagonist": actions[0], "action_adversary": drawn["action_adversary"]}
+            )
+            ended = move.terminated or move.truncated
+        if ended:
+            game.reset()
+
+    def close(self) -> None:
+        self.game.close()
+
+
+class _Raw:
+    """``gymnasium.make(env)`` stepped one action at a time."""
+
+    def __init__(self, env_id: str) -> None:
+        self.env = gym.make(env_id)
+
+    def reset(self, seed: int) -> None:
+        self.env.reset(seed=seed)
+
+    def step(self, actions: np.ndarray) -> None:
+        _, _, terminated, truncated, _ = self.env.step(actions[0])
+        if terminated or truncated:
+            self.env.reset()
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[], Any]]:
+    out: dict[str, Callable[[], Any]] = {
+        "sync": lambda: gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n)
+    }
+    for k in threads:
+        out[f"array-t{k}"] = functools.partial(_Array, env_id, n, k)
+        if n > 1:
+            out[f"view-t{k}"] = functools.partial(_View, env_id, n, k, array=True)
+            out[f"lockstep-t{k}"] = functools.partial(_View, env_id, n, k, array=False)
+    try:
+        import envpool
+
+        for k in threads:
+            out[f"envpool-t{k}"] = functools.partial(
+                envpool.make_gymnasium, env_id, num_envs=n, num_threads=k, seed=0
+            )
+    except ImportError:
+        print("envpool is not importable here: its columns are skipped (see the docstring)")
+    return out
+
+
+def measure(
+    variants: dict[str, Callable[[], Any]],
+    env_id: str,
+    n: int,
+    rounds: int,
+    chunk: int,
+    clock: Callable[[], float] = time.perf_counter,
+) -> dict[str, list[float]]:
+    """Env-steps/s of every variant per round, interleaved, timed by `clock`."""
+    space = gym.make(env_id).action_space
+    assert isinstance(space, gym.spaces.Box)
+    actions = np.random.default_rng(0).uniform(space.low, space.high, (chunk, n, *space.shape))
+    envs = {name: make() for name, make in variants.items()}
+    for name, env in envs.items():
+        if name.startswith("envpool"):
+            env.reset()  # seeded at construction
+        else:
+            env.reset(seed=0)
+    rates: dict[str, list[float]] = {name: [] for name in envs}
+    for _ in range(rounds):
+        for name, env in envs.items():
+            acts = actions.astype(np.float64 if name.startswith("envpool") else np.float32)
+            start = clock()
+            for a in acts:
+                env.step(a)
+            rates[name].append(chunk * n / (clock() - start))
+    for env in envs.values():
+        env.close()
+    return rates
+
+
+def _row(label: str, rates: dict[str, list[float]], base: str) -> str:
+    cells = [
+        quartiles([v / s for v, s in zip(values, rates[base], strict=True)])
+        for key, values in rates.items()
+        if key != base
+    ]
+    return f"| {label} | {statistics.median(rates[base]):.0f} | " + " | ".join(cells) + " |"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", default="HalfCheetah-v5")
+    parser.add_argument("--n", default="1,8,64")
+    parser.add_argument("--threads", default="1,2")
+    parser.add_argument("--rounds", type=int, default=15)
+    parser.add_argument("--chunk", type=int, default=50, help="vector steps per segment")
+    parser.add_argument("--no-single", dest="single", action="store_false")
+    parser.add_argument(
+        "--single-only", action="store_true", help="only part 2, the single game vs the raw env"
+    )
+    parser.add_argument(
+        "--clock",
+        choices=("wall", "cpu"),
+        default="wall",
+        help="wall time, or the process's CPU time (on loaded cores: time spent descheduled "
+        "does not count, though caches are still shared)",
+    )
+    args = parser.parse_args()
+    clock = time.process_time if args.clock == "cpu" else time.perf_counter
+    threads = [int(k) for k in args.threads.split(",")]
+    _calibrate(args.clock)
+    for n in [] if args.single_only else [int(x) for x in args.n.split(",")]:
+        rates = measure(
+            _variants(args.env, n, threads), args.env, n, args.rounds, args.chunk, clock
+        )
+        print(f"| {args.env} N | sync steps/s | " + " | ".join(k for k in rates if k != "sync"))
+        print(_row(str(n), rates, "sync"))
+    if args.single or args.single_only:
+        single = {
+            "raw": lambda: _Raw(args.env),
+            "game": lambda: _Single(args.env),
+            "parallel-env": lambda: _Single(args.env, pettingzoo=True),
+            "array-1": lambda: _Array(args.env, 1, 1),
+        }
+        rates = measure(single, args.env, 1, args.rounds, args.chunk * 8, clock)
+        _calibrate(args.clock)  # the load may have moved during the run: before and after
+        print(
+            f"| {args.env} single ({args.clock} time) | raw steps/s | game (`play`) "
+            "| ParallelEnv (`step`) | array game of one |"
+        )
+        print(_row("1", rates, "raw"))
+
+
+def _calibrate(clock: str) -> None:
+    load = os.getloadavg()[0]
+    print(
+        f"calibration: raw HalfCheetah-v5 step {step_us(5_000, 3):.1f} µs wall "
+        f"(load {load:.2f}; this run times in {clock} time)"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,93 @@
+"""One ATLA iteration on Hopper-v5 with its views on the array game vs on the lockstep path.
+
+A campaign-sized ATLA iteration (`advgame.training.METHODS["atla"]`: a PPO protagonist and a
+PPO observation adversary in normalized units, alternating; ``protagonist_steps`` and
+``adversary_steps`` one PPO rollout of all ``--n-envs`` views each, default 8 views, so
+16,384 steps per side) is timed end to end (sides built, both phases trained, checkpoint
+written; the quick evaluation off), ``--rounds`` times each way, interleaved:
+
+* ``array``: the training views' `VectorView` plays them as one `ArrayGame` (today's default);
+* ``lockstep``: the same views on `VectorView`'s lockstep path (``array=False``: before).
+
+Printed: a calibration line (`benchmarks/calibrate.py`), each round's environment steps per
+second both ways, and the median per-round ratio array / lockstep. Torch runs on one thread.
+Run on quiet cores: ``python benchmarks/bench_atla_array.py`` (``--n-envs``, ``--rounds``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+from calibrate import step_us
+
+import advgame.core.vector as vector
+from advgame.agents import PPOConfig
+from advgame.training import METHODS, TrainConfig, train
+
+ENV = "Hopper-v5"
+_INIT = vector.VectorView.__init__
+
+
+def _force(array: bool) -> None:
+    """Make every `VectorView` built from now on take the array path or not."""
+
+    def init(self: Any, env_fns: Any, exact: bool = True, array_: bool = array) -> None:
+        _INIT(self, env_fns, exact, array=array_)
+
+    vector.VectorView.__init__ = init  # type: ignore[method-assign,assignment]
+
+
+def iteration(out: Path, n_envs: int, seed: int, array: bool) -> float:
+    """Environment steps per second of one ATLA iteration (both phases, end to end)."""
+    _force(array)
+    rollout = PPOConfig().n_steps * n_envs
+    cfg = TrainConfig(
+        scenario=ENV,
+        **METHODS["atla"],
+        iterations=1,
+        protagonist_steps=rollout,
+        adversary_steps=rollout,
+        eval_episodes=0,
+        seed=seed,
+        n_envs=n_envs,
+    )
+    start = time.perf_counter()
+    run = train(cfg, out, progress=False)
+    wall = time.perf_counter() - start
+    with (run / "progress.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    return (int(rows[-1]["protagonist_steps"]) + int(rows[-1]["adversary_steps"])) / wall
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--n-envs", type=int, default=8)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    load = os.getloadavg()[0]
+    print(f"calibration: raw HalfCheetah-v5 step {step_us(5_000, 3):.1f} µs (load {load:.2f})")
+    ratios = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(args.rounds):
+            lock = iteration(Path(tmp) / f"lock{r}", args.n_envs, args.seed, array=False)
+            arr = iteration(Path(tmp) / f"array{r}", args.n_envs, args.seed, array=True)
+            ratios.append(arr / lock)
+            print(f"round {r}: lockstep {lock:.0f} steps/s, array {arr:.0f} steps/s", flush=True)
+    print(
+        f"{ENV} ATLA iteration, {args.n_envs} views: median ratio array / lockstep "
+        f"{statistics.median(ratios):.2f} (rounds: {', '.join(f'{x:.2f}' for x in ratios)})"
+    )
+
+
+if __name__ == "__main__":
+    main()
