@@ -213,12 +213,7 @@ class ActionRuntime(AdditiveDisruptor):
             a = np.array([acts[t] for acts in actions])  # np.stack: same, slower
             if a.dtype.kind != "f":  # as `action`: a non-float action enters as float64
                 a = a.astype(np.float64)
-            if self.mode == "additive":
-                new = a + b * (self.unit if block is None else self.unit[block])
-            else:
-                adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
-                new = (1.0 - self.alpha) * a.astype(np.float64) + self.alpha * adv
-            new = new.clip(*bounds).astype(space.dtype)
+            new = self._rows_moved(a, b, block, space, bounds)
             for acts, row in zip(actions, new, strict=True):
                 acts[t] = row
 
@@ -238,12 +233,21 @@ class ActionRuntime(AdditiveDisruptor):
             a = actions[t]
             if a.dtype.kind != "f" or a.dtype.itemsize > 8:  # as `action`: enters as float64
                 a = a.astype(np.float64)
-            if self.mode == "additive":
-                new = a + b * (self.unit if block is None else self.unit[block])
-            else:
-                adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
-                new = (1.0 - self.alpha) * a.astype(np.float64) + self.alpha * adv
-            actions[t] = new.clip(*bounds).astype(space.dtype)
+            actions[t] = self._rows_moved(a, b, block, space, bounds)
+
+    def _rows_moved(
+        self, a: np.ndarray, b: np.ndarray, block: Any, space: spaces.Box, bounds: Any
+    ) -> np.ndarray:
+        """Rows `a` of one 1-D Box moved by the adversary's rows `b`, clipped to the space.
+
+        The additive or noisy mode's arithmetic of `action`, on every row at once.
+        """
+        if self.mode == "additive":
+            new = a + b * (self.unit if block is None else self.unit[block])
+        else:
+            adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
+            new = (1.0 - self.alpha) * a.astype(np.float64) + self.alpha * adv
+        return new.clip(*bounds).astype(space.dtype)
 
 
 def _size(space: spaces.Box | spaces.Discrete) -> int:
