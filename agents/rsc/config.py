@@ -59,7 +59,8 @@ class RSCConfig(_OffPolicyConfig):
     graph_lr: float = 3e-2
     """The causal graph logits' Adam step size (ours)."""
     sparsity: float = 3e-3
-    """λ: weight of the graph's expected number of edges in the world-model loss (ours)."""
+    """λ: weight of the graph's sparsity term in the world-model loss (ours; on −log P(edge absent)
+    with hard draws, on the expected number of edges with relaxed ones)."""
     temperature: float = 1.0
     """τ of the Gumbel-Softmax draws of the graph (ours)."""
     model_warmup: int = 1000

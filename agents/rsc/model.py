@@ -88,7 +88,8 @@ class CausalWorldModel(nn.Module):
         hidden: width of each output's two hidden layers.
         lr: Adam step size of the networks.
         graph_lr: Adam step size of the graph logits.
-        sparsity: λ, the weight of the expected number of edges in the loss.
+        sparsity: λ, the weight of the sparsity term (`losses`: on −log P(edge absent) for hard draws,
+            on the expected number of edges for relaxed ones).
         temperature: τ of the Gumbel-Softmax draws of the graph.
         sigma: the fixed standard deviation of the Gaussian likelihood (standardised units).
         init_logit: initial logit of every edge (2: each edge starts present with p ≈ 0.88).

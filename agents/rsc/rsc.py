@@ -89,13 +89,11 @@ class RSC(SAC):
         model_hidden: width of the world model's per-output hidden layers.
         model_lr: Adam step size of the world model's networks.
         graph_lr: Adam step size of its causal graph's logits.
-        sparsity: λ, the weight of the graph's expected number of edges.
-        temperature: τ of the Gumbel-Softmax draws of the graph.
+        sparsity: λ, the weight of the graph's sparsity term (`CausalWorldModel.losses`).
+        temperature: τ of the Gumbel-Softmax draws of the graph (``graph_draws="relaxed"``).
         model_warmup: world-model updates before the first augmented row.
-        graph_draws: how the world model's loss draws its graphs, ``"hard"`` (Bernoulli
-            draws, score-function gradient) or ``"relaxed"`` (Gumbel-Softmax draws).
-        keep_self_edges: every state output keeps its own past, ``s[i] → s'[i]``, as an edge
-            that is always present (not drawn, not in the sparsity term).
+        graph_draws: ``"hard"`` (Bernoulli draws, score-function gradient) or ``"relaxed"``.
+        keep_self_edges: each state output's own past, ``s[i] → s'[i]``, is always an edge.
     """
 
     def __init__(
