@@ -45,11 +45,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from _common import quartiles
+from bench_batch_physics import GameViews
 from calibrate import step_us
 
 import advgame
 from advgame.core.array_game import ArrayGame
-from advgame.core.physics import THREADS_VAR
 
 ADVERSARIES = ("observation_adversary", "action_adversary")
 
@@ -76,31 +76,6 @@ class _Array:
 
     def close(self) -> None:
         self.game.close()
-
-
-class _View:
-    """`VectorView` of protagonist views with random adversaries, array or lockstep path."""
-
-    def __init__(self, env_id: str, n: int, threads: int, array: bool) -> None:
-        from advgame.adversaries import RandomAdversary
-        from advgame.core.vector import VectorView
-        from advgame.core.views import view_factory
-
-        policies = {a: RandomAdversary() for a in ADVERSARIES}
-        self.threads = str(threads)
-        fns = [view_factory(env_id, "protagonist", policies, preset="default")] * n
-        self.venv = VectorView(fns, array=array)
-        self.venv.seed(0)
-
-    def reset(self, seed: int) -> None:
-        self.venv.reset()
-
-    def step(self, actions: np.ndarray) -> None:
-        os.environ[THREADS_VAR] = self.threads  # the simulator threads of this variant
-        self.venv.step(actions)
-
-    def close(self) -> None:
-        self.venv.close()
 
 
 class _Single:
@@ -169,8 +144,8 @@ def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[],
     for k in threads:
         out[f"array-t{k}"] = functools.partial(_Array, env_id, n, k)
         if n > 1:
-            out[f"view-t{k}"] = functools.partial(_View, env_id, n, k, array=True)
-            out[f"lockstep-t{k}"] = functools.partial(_View, env_id, n, k, array=False)
+            out[f"view-t{k}"] = functools.partial(GameViews, env_id, n, k, array=True)
+            out[f"lockstep-t{k}"] = functools.partial(GameViews, env_id, n, k, array=False)
     try:
         import envpool
 

@@ -97,10 +97,13 @@ class _Stepper:
         self.stepper.close()
 
 
-class _Game:
-    """The batched game: a `VectorView` of protagonist views with random adversaries."""
+class GameViews:
+    """The batched game: a `VectorView` of protagonist views with random adversaries.
 
-    def __init__(self, env_id: str, n: int, threads: int) -> None:
+    ``array=False`` keeps `VectorView`'s lockstep path (`benchmarks/bench_array_game.py`).
+    """
+
+    def __init__(self, env_id: str, n: int, threads: int, array: bool = True) -> None:
         from advgame.adversaries import RandomAdversary
         from advgame.core.vector import VectorView
         from advgame.core.views import view_factory
@@ -108,18 +111,21 @@ class _Game:
         policies = {a: RandomAdversary() for a in ("observation_adversary", "action_adversary")}
         self.threads = str(threads)
         self.venv = VectorView(
-            [view_factory(env_id, "protagonist", policies, preset="default")] * n
+            [view_factory(env_id, "protagonist", policies, preset="default")] * n, array=array
         )
         self.venv.seed(0)
 
     def reset(self, seed: int) -> None:
+        """Reset every view (their seeds were set at construction)."""
         self.venv.reset()
 
     def step(self, actions: np.ndarray) -> None:
-        os.environ[THREADS_VAR] = self.threads  # the simulator threads of this variant
+        """One vector step, on this variant's simulator threads."""
+        os.environ[THREADS_VAR] = self.threads
         self.venv.step(actions)
 
     def close(self) -> None:
+        """Close the views' games."""
         self.venv.close()
 
 
@@ -132,7 +138,7 @@ def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[],
     for k in threads:
         out[f"stepper-t{k}"] = lambda k=k: _Stepper(env_id, n, k)
     for k in threads:
-        out[f"game-t{k}"] = lambda k=k: _Game(env_id, n, k)
+        out[f"game-t{k}"] = lambda k=k: GameViews(env_id, n, k)
     try:
         import envpool
 
