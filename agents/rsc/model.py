@@ -194,16 +194,14 @@ class CausalWorldModel(nn.Module):
         sparsity term while the loss stayed low, and the most probable graph then cut it
         (docs/causal.md, "The graph's draws").
         """
-        x = self.inputs.normalize(th.cat([obs, actions], dim=1).float())
-        y = self.targets.normalize(th.cat([next_obs, rewards.reshape(-1, 1)], dim=1).float())
+        x, y = self._standardised(obs, actions, next_obs, rewards)
         learned = 1 - self.kept
         if self.graph_draws == "relaxed":
             penalty = self.sparsity * (self.edge_probabilities() * learned).sum()
-        else:  # −log P(edge absent): its gradient σ(φ) does not vanish on a confident edge
-            penalty = self.sparsity * (F.softplus(self.graph_logits) * learned).sum()
-        if self.graph_draws == "relaxed":
             pred = self(x, self.sample_graph(len(x)))
             return ((pred - y) ** 2).sum(dim=1).mean() / (2 * self.sigma**2), penalty
+        # −log P(edge absent): its gradient σ(φ) does not vanish on a confident edge
+        penalty = self.sparsity * (F.softplus(self.graph_logits) * learned).sum()
         rows = len(x)
         with th.no_grad():
             graph = th.bernoulli(self.edge_probabilities().expand(rows, -1, -1))
@@ -215,6 +213,13 @@ class CausalWorldModel(nn.Module):
         )
         score = (advantage.unsqueeze(2) * log_p * learned).mean(dim=0).sum()
         return per_row.sum(dim=1).mean() + score - score.detach(), penalty
+
+    def _standardised(
+        self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor
+    ) -> tuple[th.Tensor, th.Tensor]:
+        """The model's input ``(s, a)`` and target ``(s', r)`` rows in standardised units."""
+        x = self.inputs.normalize(th.cat([obs, actions], dim=1).float())
+        return x, self.targets.normalize(th.cat([next_obs, rewards.reshape(-1, 1)], dim=1).float())
 
     def update(
         self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor
@@ -239,8 +244,7 @@ class CausalWorldModel(nn.Module):
         graph per row instead, so the two can differ. Shape (obs_dim + 1,): ``s'`` then ``r``;
         an output predicted no better than its mean scores about 1.
         """
-        x = self.inputs.normalize(th.cat([obs, actions], dim=1).float())
-        y = self.targets.normalize(th.cat([next_obs, rewards.reshape(-1, 1)], dim=1).float())
+        x, y = self._standardised(obs, actions, next_obs, rewards)
         return ((self(x, self.mode_graph()) - y) ** 2).mean(dim=0)
 
     def mode_error(

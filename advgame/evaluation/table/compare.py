@@ -32,7 +32,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import defaultdict
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -46,7 +46,6 @@ __all__ = [
     "agent_means",
     "compare_columns",
     "compare_methods",
-    "describe",
     "method_of",
 ]
 
@@ -208,8 +207,3 @@ def _smallest_p(c: Comparison) -> float:
         return 2 / 2 ** len(c.values_a)
     splits = math.comb(len(c.values_a) + len(c.values_b), len(c.values_a))
     return (2 if len(c.values_a) == len(c.values_b) else 1) / splits
-
-
-def describe(comparisons: Sequence[Comparison]) -> str:
-    """One line per comparison (`Comparison.sentence`)."""
-    return "\n".join(c.sentence() for c in comparisons)
