@@ -20,9 +20,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from gymnasium import spaces
 
 import advgame
-from advgame.interop import FixedInfos
+from advgame.interop import ActionMaskObservations, FixedInfos
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -105,3 +106,29 @@ def test_fixed_infos_keeps_every_key_on_every_move() -> None:
     acted = [i["observation_adversary"]["acted"] for i in seen[1:]]
     assert acted == [1.0, 0.0] * 3  # the sense move is the observation adversary's
     game.close()
+
+
+def test_action_mask_observations_wraps_each_observation_and_nothing_else() -> None:
+    def make() -> advgame.Game:
+        return advgame.make("HalfCheetah-v5", preset="default", max_episode_steps=3)
+
+    game, plain = ActionMaskObservations(make()), make()
+    for agent in game.possible_agents:
+        space = game.observation_space(agent)
+        assert space is game.observation_spaces[agent]  # cached, as the game's own
+        assert space["observation"] is game.env.observation_space(agent)
+        assert space["action_mask"] == spaces.Box(0, 1, plain.action_space(agent).shape, np.int8)
+    observations, _ = game.reset(seed=0)
+    expected, _ = plain.reset(seed=0)
+    rng = np.random.default_rng(0)
+    while plain.agents:
+        for agent, obs in observations.items():
+            assert obs in game.observation_space(agent)
+            assert np.all(obs["action_mask"] == 1)
+            np.testing.assert_array_equal(obs["observation"], expected[agent])
+        actions = {a: rng.uniform(-1, 1, plain.action_space(a).shape) for a in plain.agents}
+        observations, *_ = game.step(actions)
+        expected, *_ = plain.step(actions)
+    assert not game.agents
+    game.close()
+    plain.close()

@@ -9,12 +9,16 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-_LAZY = {"FixedInfos": "advgame.interop.infos"}
+_LAZY = {
+    "ActionMaskObservations": "advgame.interop.masks",
+    "FixedInfos": "advgame.interop.infos",
+}
 
-__all__ = ["FixedInfos"]
+__all__ = ["ActionMaskObservations", "FixedInfos"]
 
 if TYPE_CHECKING:
     from advgame.interop.infos import FixedInfos
+    from advgame.interop.masks import ActionMaskObservations
 
 
 def __getattr__(name: str) -> Any:
