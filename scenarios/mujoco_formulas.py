@@ -74,7 +74,8 @@ def _times(weight: float, values: np.ndarray) -> np.ndarray:
 
 
 def _ctrl_cost(weight: float, actions: np.ndarray) -> np.ndarray:
-    return _times(weight, np.sum(np.square(actions), axis=1))
+    # np.add.reduce is np.sum's own reduction, without its Python wrapper (~1 µs a step)
+    return _times(weight, np.add.reduce(np.square(actions), axis=1))
 
 
 def _x(g: Stacked, env: Any) -> np.ndarray:
