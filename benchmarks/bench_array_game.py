@@ -4,9 +4,13 @@ Part 1, N copies of a MuJoCo v5 task (``--env``, default HalfCheetah-v5) for N i
 (default 1, 8, 64), random actions drawn before timing, every variant stepping the same actions:
 
 * ``sync``: Gymnasium's ``SyncVectorEnv`` of N ``gymnasium.make(env)`` over the raw task (1.00).
+* ``floor``: the same N unwrapped envs' simulators stepped by a bare Python loop (controls
+  written, ``mj_step``; no observation, reward or game): the least Python per copy of any design
+  that keeps one ``MjData`` a copy, so its ratio bounds what the array game reaches on one thread.
 * ``array-tK``: `advgame.core.array_game.ArrayGame` of N games of preset ``default`` with
-  uniformly random observation and action adversaries (a sense and an act call per step,
-  budgets checked, clips counted, finished copies reset), K simulator threads.
+  uniformly random observation and action adversaries (drawn before timing, as the protagonist's
+  actions are; a sense and an act call per step, budgets checked, clips counted, finished copies
+  reset), K simulator threads.
 * ``view-tK``: `advgame.core.vector.VectorView` of N protagonist views of the same games with
   `RandomAdversary` policies embedded (what training steps; on the array game).
 * ``lockstep-tK``: the same `VectorView` on its lockstep path (``array=False``: before the array
@@ -55,22 +59,30 @@ ADVERSARIES = ("observation_adversary", "action_adversary")
 
 
 class _Array:
-    """An `ArrayGame` of preset ``default`` whose adversaries draw uniform actions."""
+    """An `ArrayGame` of preset ``default`` whose adversaries play uniform actions.
+
+    As in `_Single`, the adversaries' actions are drawn before timing (a pool cycled through),
+    as the protagonist's are: the ratio is the game's own cost, not a policy's.
+    """
 
     def __init__(self, env_id: str, n: int, threads: int) -> None:
         self.game = ArrayGame(
             [advgame.make(env_id, preset="default") for _ in range(n)], threads=threads
         )
-        self.rng = np.random.default_rng(1)
+        rng = np.random.default_rng(1)
+        sizes = {a: (n, *self.game.games[0].action_space(a).shape) for a in ADVERSARIES}
+        self.pool = [{a: rng.uniform(-1, 1, s) for a, s in sizes.items()} for _ in range(97)]
+        self.i = 0
         self.n = n
 
     def reset(self, seed: int) -> None:
         self.game.reset(seed=seed)
 
     def step(self, actions: np.ndarray) -> None:
-        game, rng = self.game, self.rng
-        game.sense({"observation_adversary": rng.uniform(-1, 1, game.state().shape)})
-        game.act({"protagonist": actions, "action_adversary": rng.uniform(-1, 1, actions.shape)})
+        game, drawn = self.game, self.pool[self.i]
+        self.i = (self.i + 1) % len(self.pool)
+        game.sense({"observation_adversary": drawn["observation_adversary"]})
+        game.act({"protagonist": actions, "action_adversary": drawn["action_adversary"]})
         if game.done.any():
             game.reset(rows=game.done)
 
@@ -137,9 +149,38 @@ class _Raw:
         self.env.close()
 
 
+class _Floor:
+    """N unwrapped envs' simulators stepped by a bare loop: the controls written, ``mj_step``.
+
+    No observation, reward, time limit or reset: the least Python any design that keeps one
+    ``MjData`` per copy (as exactness needs: `advgame.core.physics`) runs per copy and step.
+    Its ratio to ``sync`` bounds what the array game can reach on one thread.
+    """
+
+    def __init__(self, env_id: str, n: int) -> None:
+        self.envs = [gym.make(env_id).unwrapped for _ in range(n)]
+
+    def reset(self, seed: int) -> None:
+        for i, env in enumerate(self.envs):
+            env.reset(seed=seed + i)
+
+    def step(self, actions: np.ndarray) -> None:
+        import mujoco
+
+        mj_step = mujoco.mj_step
+        for env, a in zip(self.envs, actions, strict=True):
+            env.data.ctrl[:] = a
+            mj_step(env.model, env.data, env.frame_skip)
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
 def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[], Any]]:
     out: dict[str, Callable[[], Any]] = {
-        "sync": lambda: gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n)
+        "sync": lambda: gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n),
+        "floor": functools.partial(_Floor, env_id, n),
     }
     for k in threads:
         out[f"array-t{k}"] = functools.partial(_Array, env_id, n, k)

@@ -28,6 +28,7 @@ Example:
 
 from __future__ import annotations
 
+import operator
 from typing import Any
 
 import gymnasium as gym
@@ -78,17 +79,25 @@ def batched_step(
     wrong action shape): the caller then steps them one by one.
     """
     t0 = tasks[0]
+    try:  # every key made once per task: compared in C, not one Python call a copy
+        keys = set(map(_KEY, tasks))
+    except AttributeError:
+        keys = {_array_key(t) for t in tasks}
     key = _array_key(t0)
-    env_id = key[1]
-    if env_id not in FORMULAS or any(_array_key(t) != key for t in tasks):
+    if len(keys) != 1 or key[1] not in FORMULAS:
         return None
     if actions.shape != (len(tasks), t0._inner.model.nu):
         return None
-    envs = [t._inner for t in tasks]
+    envs = list(map(_INNER, tasks))
+    env_id = key[1]
     obs, reward, terminated, info = step_envs(
         envs, FORMULAS[env_id], actions, shared_stepper(threads)
     )
     return {GymTask.AGENT: obs}, reward, terminated, info
+
+
+_KEY = operator.attrgetter("_array_key")
+_INNER = operator.attrgetter("_inner")
 
 
 def _array_key(task: Any) -> tuple[Any, ...]:

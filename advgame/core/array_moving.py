@@ -101,13 +101,15 @@ class ArrayMoves:
         where it does not act are ignored); `rows` (a bool mask) limits the move to some
         copies. Returns the protagonists' shown observations; `last_clipped` the clips.
         """
-        mask = np.ones(self.n, np.bool_) if rows is None else np.asarray(rows, np.bool_)
+        mask = None if rows is None else np.asarray(rows, np.bool_)
         self._require(mask)
         for d in self._sensing:
-            on = self._active[d.agent] & mask
-            self.last_clipped[d.agent] = self._decode(d, actions, on) if on.any() else on * 0
+            on = self._active[d.agent] if mask is None else self._active[d.agent] & mask
             if on.any():
+                self.last_clipped[d.agent] = self._decode(d, actions, on)
                 self._apply_obs(d, self._shown, self._last[d.agent], on)
+            else:
+                self.last_clipped[d.agent] = np.zeros(self.n, np.int64)
         return self.shown()
 
     def act(self, actions: Mapping[str, Any]) -> ArrayStep:
@@ -156,9 +158,10 @@ class ArrayMoves:
                 for p in self.protagonists:
                     rewards[p][rows], costs[p][rows] = sub_r[p], sub_c[p]
         self.t += 1
-        truncated = r.truncated.copy()
-        if self._limit is not None:
-            truncated |= self.t >= self._limit
+        if self._limit is None:
+            truncated = r.truncated.copy()
+        else:
+            truncated = r.truncated | (self.t >= self._limit)
         self.done = r.terminated | truncated
         self._true = dict(r.observations)
         self._begin_step(acted)
