@@ -40,6 +40,7 @@ from advgame.core.physics import ThreadedStepper, shared_stepper
 from advgame.core.task import ArrayResult, GymTask, StepResult
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 from advgame.scenarios.mujoco_formulas import FORMULAS, Formula, Outcome, Stacked
+from advgame.scenarios.mujoco_lean import lean_step
 
 __all__ = ["TASKS", "BatchedGymTask", "BatchedMujocoEnv", "batched_step", "step_envs"]
 
@@ -297,11 +298,13 @@ class BatchedMujocoEnv(VectorEnv):
 class BatchedGymTask(GymTask):
     """A Gymnasium MuJoCo v5 task base whose alike games step their simulators as one batch.
 
-    A single game steps it exactly as `GymTask`. N alike games moving together
-    (`advgame.core.lockstep`, under `advgame.core.vector.VectorView` and batched evaluation)
-    call `step_many`, which steps all N simulators on the process's shared simulator threads
-    (`advgame.core.physics.shared_stepper`) and computes observations, rewards and infos over
-    ``[N, ...]`` (`step_envs`): the same results, bit for bit, as N ``step`` calls.
+    A single game steps it exactly as `GymTask`, through the task's lean step where it has one
+    (`advgame.scenarios.mujoco_lean`: ``env.step``'s results with less Python). N alike games
+    moving together (`advgame.core.lockstep`, under `advgame.core.vector.VectorView` and
+    batched evaluation) call `step_many`, which steps all N simulators on the process's shared
+    simulator threads (`advgame.core.physics.shared_stepper`) and computes observations, rewards
+    and infos over ``[N, ...]`` (`step_envs`): the same results, bit for bit, as N ``step``
+    calls.
 
     Args:
         env_id: one of `TASKS`.
@@ -312,6 +315,14 @@ class BatchedGymTask(GymTask):
     def __init__(self, env_id: str, cost_key: str | None = None, **kwargs: Any) -> None:
         super().__init__(env_id, cost_key=cost_key, **kwargs)
         self._batch_key = (env_id, cost_key, repr(sorted(kwargs.items())))
+        plain = self._inner is self.env.unwrapped
+        self._lean = lean_step(self._inner) if plain else None
+
+    def step(self, actions: Any) -> StepResult:
+        """`GymTask.step`, through the task's lean step where it has one (`mujoco_lean`)."""
+        if self._lean is None:
+            return super().step(actions)
+        return self._result(*self._lean(actions[self.AGENT]))
 
     @classmethod
     def step_many(cls, tasks: Any, actions: Any) -> list[StepResult]:

@@ -128,6 +128,14 @@ class ActionRuntime(AdditiveDisruptor):
         self._flat = spec.mode in ("additive", "noisy") and all(
             isinstance(space, spaces.Box) and len(space.shape) == 1 for _, _, space, _ in self._plan
         )  # deterministic and whole 1-D Boxes: `action_rows` stacks them
+        t0, block0, space0, bounds0 = self._plan[0]
+        self._lone = (
+            (t0, space0.dtype, bounds0)
+            if spec.mode == "additive" and len(self._plan) == 1 and block0 is None
+            and isinstance(space0, spaces.Box)
+            else None
+        )  # fmt: skip
+        """(target, dtype, bounds) when `action` has one additive whole-Box target, else None."""
 
     def encode(self, value: Any) -> np.ndarray:
         """Raw units -> adversary action: an offset (additive) or the adversary's own action."""
@@ -170,6 +178,12 @@ class ActionRuntime(AdditiveDisruptor):
 
     def action(self, actions: dict[str, Any], u: np.ndarray, rng: np.random.Generator) -> None:
         """Replace each target's action by its disrupted version."""
+        if self._lone is not None:  # additive on one whole Box: the loop below, its one case
+            t, dtype, bounds = self._lone
+            a = actions[t]
+            if type(a) is np.ndarray and a.dtype.kind == "f" and a.dtype.itemsize <= 8:
+                actions[t] = clip_ufunc(a + u * self.unit, *bounds).astype(dtype)
+                return
         for t, block, space, bounds in self._plan:
             b = u if block is None else u[block]
             if isinstance(space, spaces.Discrete):

@@ -217,6 +217,13 @@ class ObservationRuntime(AdditiveDisruptor):
             sizes += dict_obs.key_blocks(self.plans[t]) if t in self.plans else [dims[t].size]
         super().__init__(spec, self._unit(), bounded=spec.bounded, norm=spec.norm, blocks=sizes)
         self._plan = self._blocks()
+        t0, block0, full0, space0, bounds0 = self._plan[0]
+        self._lone: tuple[str, spaces.Box, Bounds] | None = (
+            (t0, space0, bounds0)
+            if len(self._plan) == 1 and block0 is None and full0 and space0 is not None
+            else None
+        )
+        """(target, space, bounds) when `observation` has one whole Box target, else None."""
         self._flat = all(  # every target a whole 1-D Box: `observation_rows` stacks them
             space is not None and full and len(space.shape) == 1
             for _, _, full, space, _ in self._plan
@@ -279,6 +286,12 @@ class ObservationRuntime(AdditiveDisruptor):
 
     def observation(self, observations: dict[str, Any], u: np.ndarray) -> None:
         """Add δ to each target's observation, clipped into its observation space."""
+        if self._lone is not None:  # one whole 1-D Box target: the loop below, its one case
+            target, box, box_bounds = self._lone
+            obs = observations[target]
+            if obs.ndim == 1:
+                observations[target] = _into(obs + self.perturbation(u), box, box_bounds)
+                return
         delta = self.perturbation(u)
         for t, block, full, space, bounds in self._plan:
             d = delta if block is None else delta[block]
