@@ -9,6 +9,8 @@ written; the quick evaluation off), ``--rounds`` times each way, interleaved:
 * ``array``: the training views' `VectorView` plays them as one `ArrayGame` (today's default);
 * ``lockstep``: the same views on `VectorView`'s lockstep path (``array=False``: before).
 
+Each round runs both, in alternating order (lockstep first in even rounds, array first in odd).
+
 Printed: a calibration line (`benchmarks/calibrate.py`), each round's environment steps per
 second both ways, and the median per-round ratio array / lockstep. Torch runs on one thread.
 Run on quiet cores: ``python benchmarks/bench_atla_array.py`` (``--n-envs``, ``--rounds``).
@@ -79,8 +81,13 @@ def main() -> None:
     ratios = []
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(args.rounds):
-            lock = iteration(Path(tmp) / f"lock{r}", args.n_envs, args.seed, array=False)
-            arr = iteration(Path(tmp) / f"array{r}", args.n_envs, args.seed, array=True)
+            # the order alternates by round (ABBA...), so that drift within a round, or what the
+            # first iteration leaves behind for the second, does not favour one path
+            rates = {}
+            for array in (False, True) if r % 2 == 0 else (True, False):
+                name = "array" if array else "lock"
+                rates[array] = iteration(Path(tmp) / f"{name}{r}", args.n_envs, args.seed, array)
+            lock, arr = rates[False], rates[True]
             ratios.append(arr / lock)
             print(f"round {r}: lockstep {lock:.0f} steps/s, array {arr:.0f} steps/s", flush=True)
     print(
