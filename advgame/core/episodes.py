@@ -2,7 +2,9 @@
 
 This is the evaluation primitive: a `Policy` (or spec, or callable) per agent, a seed, an
 `EpisodeResult` with the protagonists' *true* return (what robust metrics are computed on),
-their observed return, and each adversary's clip count.
+their observed return, and each adversary's clip count. `rollout_batch` plays many episodes at
+once: alike games on arrays while all their episodes are live (`advgame.core.array_rollout`),
+the rest in lockstep (`advgame.core.lockstep`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import numpy as np
 from gymnasium import spaces
 
 from advgame.core import lockstep
+from advgame.core.array_rollout import play_arrays
 from advgame.core.policy import ConstantPolicy, Policy, as_policy
 from advgame.errors import ConfigError
 
@@ -180,10 +183,13 @@ def rollout_batch(
 
     Game ``k`` plays ``policies[k]`` and resets with ``seeds[k]``; with `indices`, it is
     episode ``indices[k]`` of its scheduled policies (`reseed_policies`). `policies` are built
-    policies (`build_policies`), one dict per game, reseeded here. Alike games (one scenario
-    and disruptor set-up) make each move together (`advgame.core.lockstep.play_all`). Before
-    each move, the policies of every game in which agent ``a`` moves are asked at once
-    (`act_batch`: one forward pass for the copies of a frozen network). Random policies must
+    policies (`build_policies`), one dict per game, reseeded here. Groups of alike games (one
+    scenario and disruptor set-up) that the array game can play first step on one `ArrayGame`
+    each until an episode of the group ends (`advgame.core.array_rollout.play_arrays`; off
+    when its ``USE_ARRAYS`` is False); then alike games make each move together
+    (`advgame.core.lockstep.play_all`). Before each move, the policies of every game in which
+    agent ``a`` moves are asked at once (`act_batch`: one forward pass for the copies of a
+    frozen network). Either way each result is the one its game plays alone. Random policies must
     keep their randomness to themselves (noise adversaries do); a policy drawing from a global
     generator (a sampling SB3 policy) would see its draws interleaved across games.
     """
@@ -199,6 +205,7 @@ def rollout_batch(
         game.reset(seed=seed)
         results.append(EpisodeResult(clipped=dict.fromkeys(game.adversaries, 0)))
     keys = [_batch_keys(pols) for pols in policies]
+    play_arrays(games, policies, keys, results)
     same = len(games) > 1 and lockstep.alike(games)
     live = [k for k, game in enumerate(games) if game.agents]
     while live:
