@@ -11,8 +11,12 @@ worker (``evaluate(jobs, workers=1)`` runs `run_job` per job in this process):
 * ``per-job``: `run_job` per job (all episodes of one job in lockstep, one policy call per
   agent per move for them: the first pass of batching).
 * ``batched``: ``evaluate(jobs, workers=1)`` (the jobs grouped by up to `LOCKSTEP_EPISODES`
-  episodes and each group played in lockstep across jobs, `play_jobs`: a protagonist's network
-  is asked once per move for all its columns and seeds, a learned adversary's for all rows).
+  episodes and each group played together across jobs, `play_jobs`: a protagonist's network
+  is asked once per move for all its columns and seeds, a learned adversary's for all rows;
+  each column's games step on one `ArrayGame` while all their episodes are live,
+  `advgame.core.array_rollout`).
+* ``lockstep``: ``batched`` with the array path off (``array_rollout.USE_ARRAYS = False``):
+  every move through the lockstep core.
 
 Protagonists and the learned adversaries are PPO networks ([64, 64]) briefly trained here
 (``--train`` steps each; deterministic actions), so episodes last long enough for the per-step
@@ -41,6 +45,7 @@ import numpy as np
 import torch
 
 from advgame.agents.common.checkpoint import SB3Checkpoint
+from advgame.core import array_rollout
 from advgame.core.views import view_factory
 from advgame.evaluation import AdversarySetup, evaluate, population_jobs, run_job
 from advgame.evaluation.table.batched import play_job_sequential
@@ -74,6 +79,15 @@ def _today(job: Any) -> list[dict[str, Any]]:
         return play_job_sequential(job)
     finally:
         forward.ActorForward.of = of  # type: ignore[method-assign]
+
+
+def _lockstep(jobs: list[Any]) -> list[dict[str, Any]]:
+    """``evaluate(jobs, workers=1)`` with the array path off: every move in lockstep."""
+    array_rollout.USE_ARRAYS = False
+    try:
+        return evaluate(jobs, workers=1, progress=False).rows
+    finally:
+        array_rollout.USE_ARRAYS = True
 
 
 def _simulator(steps: int) -> None:
@@ -136,6 +150,7 @@ def main() -> None:
             "sequential": lambda: [row for job in jobs for row in play_job_sequential(job)],
             "per-job": lambda: [row for job in jobs for row in run_job(job)],
             "batched": lambda: evaluate(jobs, workers=1, progress=False).rows,
+            "lockstep": lambda: _lockstep(jobs),
         }
         rows: dict[str, list[Any]] = {"today": paths["today"]()}
         steps = sum(int(row["length"]) for row in rows["today"])
@@ -156,7 +171,7 @@ def main() -> None:
     print(f"\n{ENV}: {len(jobs)} jobs, {n} episodes ({steps} protagonist steps), one worker")
     for key in paths:
         print(f"  {key:10s}: median {np.median(n / t[key]):7.2f} episodes/s")
-    for key in ("today", "sequential", "per-job"):
+    for key in ("today", "sequential", "per-job", "lockstep"):
         ratio = np.median(t[key] / t["batched"])
         goal = f" (goal >= {GOAL})" if key == "today" else ""
         print(f"  ratio batched / {key}: median {ratio:.2f}{goal}")
