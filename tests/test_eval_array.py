@@ -192,13 +192,13 @@ def test_normalized_budgets_and_a_batched_network(monkeypatch: pytest.MonkeyPatc
     _, groups = _three_ways([make] * 4, lambda g: _wild(g, _Net(3, std)), range(4), monkeypatch)
     assert groups == [[0, 1, 2, 3]]
     assert 4 in _Net.calls  # one call for the four copies
-    built = iter(range(1000))  # game k of each way: std 1 + k (modulo 3)
+    built = iter(range(1000))  # game k of each way: std 1 + k % 3
 
     def apart(g: advgame.Game) -> dict[str, Any]:
         return _wild(g, _Net(3, np.full(11, 1.0 + next(built) % 3)))
 
-    _, groups = _three_ways([make] * 3, apart, range(3), monkeypatch)
-    assert groups == []  # scales differ: lockstep
+    _, groups = _three_ways([make] * 6, apart, range(6), monkeypatch)
+    assert groups == [[0, 3], [1, 4], [2, 5]]  # one group per scale
 
 
 def test_mixed_setups_play_as_one_array_each(monkeypatch: pytest.MonkeyPatch) -> None:

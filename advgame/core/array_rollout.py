@@ -20,9 +20,9 @@ terminating task plays on arrays until its group's first ending.
 
 Games stay on the lockstep path when they are alone in their group, when their task base
 cannot batch its simulators (Box2D: both paths would step them one by one), when a policy reads its
-game (``policy.game``: white-box attacks, LLM adversaries), when their phases differ, or when
-their normalized-space budgets have different scales (the array game applies one copy's
-disruptors to all rows). Every `EpisodeResult` is that of the lockstep path, bit for bit
+game (``policy.game``: white-box attacks, LLM adversaries), or when their phases differ. Games
+whose normalized-space budgets have different scales (protagonists behind different
+normalizers) go to different groups: the array game applies one copy's disruptors to all rows. Every `EpisodeResult` is that of the lockstep path, bit for bit
 (``tests/test_eval_array.py``). `USE_ARRAYS` switches the path off (benchmarks, tests).
 """
 
@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -39,15 +39,27 @@ from advgame.core.lockstep import alike
 from advgame.core.policy import Policy, act_batch
 
 if TYPE_CHECKING:
-    from advgame.core.episodes import EpisodeResult
     from advgame.core.game import Game
 
-__all__ = ["USE_ARRAYS", "array_groups", "play_arrays"]
+__all__ = ["USE_ARRAYS", "Tally", "array_groups", "play_arrays"]
 
 log = logging.getLogger(__name__)
 
 USE_ARRAYS = True
 """Whether `rollout_batch` plays alike games on arrays (False: the lockstep path only)."""
+
+
+class Tally(Protocol):
+    """What `play_arrays` adds each move to: an `advgame.core.episodes.EpisodeResult`."""
+
+    true_return: float
+    observed_return: float
+    cost: float
+    payoff: float
+    length: int
+    clipped: dict[str, int]
+    terminated: bool
+
 
 _Run = tuple[ArrayGame, list[int]]  # an array game and the indices of its copies' games
 
@@ -57,7 +69,8 @@ def array_groups(
 ) -> list[list[int]]:
     """The indices of `games` that `play_arrays` plays as one `ArrayGame` each (groups of >= 2).
 
-    Games are grouped when alike (`advgame.core.lockstep.alike`); a group the array game cannot
+    Games are grouped when alike (`advgame.core.lockstep.alike`) with equal scales of their
+    normalized-space budgets (each protagonist's ``observation_std``); a group the array game cannot
     play, or whose policies or budgets forbid it (see the module docstring), is left out, and
     why is logged at debug level. Empty when `USE_ARRAYS` is False.
     """
@@ -68,7 +81,7 @@ def array_groups(
         if not game.agents:
             continue
         for idx in by:
-            if alike([games[idx[0]], game]):
+            if _scaled_alike(games[idx[0]], game) and alike([games[idx[0]], game]):
                 idx.append(k)
                 break
         else:
@@ -99,26 +112,27 @@ def _why_not(games: Sequence[Game], policies: Sequence[Mapping[str, Policy]]) ->
         for a, p in pols.items():
             if getattr(p, "game", None) is not None:
                 return f"the policy of {a!r} reads its game ({type(p).__name__})"
-    first = [_scale(d) for d in games[0]._scaled]
-    for g in games[1:]:
-        if not all(_same_scale(a, _scale(d)) for a, d in zip(first, g._scaled, strict=True)):
-            return "their normalized-space budgets have different scales"
+    if not all(_scaled_alike(games[0], g) for g in games[1:]):
+        return "their normalized-space budgets have different scales"
     return None
 
 
-def _scale(d: Any) -> dict[str, np.ndarray]:
-    return dict(getattr(d, "scale", None) or {})
-
-
-def _same_scale(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> bool:
-    return a.keys() == b.keys() and all(np.array_equal(a[t], b[t]) for t in a)
+def _scaled_alike(a: Game, b: Game) -> bool:
+    """Whether the normalized-space budgets of `a` and `b` have equal scales (or neither has)."""
+    if len(a._scaled) != len(b._scaled):
+        return False
+    for da, db in zip(a._scaled, b._scaled, strict=True):
+        sa, sb = getattr(da, "scale", None) or {}, getattr(db, "scale", None) or {}
+        if sa.keys() != sb.keys() or not all(np.array_equal(sa[t], sb[t]) for t in sa):
+            return False
+    return True
 
 
 def play_arrays(
     games: Sequence[Game],
     policies: Sequence[Mapping[str, Policy]],
     keys: Sequence[Mapping[str, Any]],
-    results: Sequence[EpisodeResult],
+    results: Sequence[Tally],
 ) -> None:
     """Play the steps of `games` (just reset) on arrays while every copy of a group is live.
 
@@ -150,7 +164,7 @@ def _sense(
     runs: Sequence[_Run],
     policies: Sequence[Mapping[str, Policy]],
     keys: Sequence[Mapping[str, Any]],
-    results: Sequence[EpisodeResult],
+    results: Sequence[Tally],
 ) -> None:
     """The sense move of every group where an observation adversary acts; clips recorded."""
     sensing = [run for run in runs if run[0].sensing().any()]
@@ -163,7 +177,7 @@ def _sense(
                 results[k].clipped[a] += n
 
 
-def _act(run: _Run, actions: dict[str, Any], results: Sequence[EpisodeResult]) -> bool:
+def _act(run: _Run, actions: dict[str, Any], results: Sequence[Tally]) -> bool:
     """The act move of one group, recorded; whether the group goes on (no episode ended)."""
     array, idx = run
     step = array.act(actions)
