@@ -101,3 +101,26 @@ def perturb_action(d, a: Any, action: np.ndarray, seed: int = 0) -> tuple[Any, n
     acts = {P: a.copy() if isinstance(a, np.ndarray) else a}
     d.action(acts, u, np.random.default_rng(seed))
     return acts[P], u, n
+
+
+def split_schedules() -> list[Any]:
+    """Disruptors whose schedules make alike copies move differently step by step.
+
+    A probabilistic observation adversary, a stale one every 2 steps and a held one every 3
+    (both holding their δ), a probabilistic noisy action adversary that holds, and a reward
+    adversary in a window of steps 2-9: the array and lockstep paths' hardest bookkeeping.
+    """
+    from advgame.core.schedule import Schedule
+    from advgame.disruptors import ActionDisruptor, ObservationDisruptor, RewardDisruptor
+
+    return [
+        ObservationDisruptor(eps=0.1, schedule=Schedule(probability=0.5)),
+        ObservationDisruptor(
+            eps=0.05, timing="stale", name="stale_adversary", schedule=Schedule(every=2, hold=True)
+        ),
+        ObservationDisruptor(
+            eps=0.02, name="held_adversary", schedule=Schedule(every=3, hold=True)
+        ),
+        ActionDisruptor(mode="noisy", alpha=0.3, schedule=Schedule(probability=0.5, hold=True)),
+        RewardDisruptor(eps=0.3, schedule=Schedule.window(2, 9)),
+    ]

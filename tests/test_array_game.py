@@ -24,9 +24,9 @@ import advgame
 from advgame.core.array_game import ArrayGame, ArrayStep, unsupported
 from advgame.core.game import Move
 from advgame.core.moves import SENSE
-from advgame.core.schedule import Schedule
 from advgame.disruptors import ActionDisruptor, ObservationDisruptor, RewardDisruptor
 from advgame.errors import ActionError, ConfigError
+from tests._disruptor_helpers import split_schedules
 
 N = 3
 MUJOCO = advgame.list_scenarios(family="mujoco")
@@ -116,17 +116,7 @@ def test_every_disruptor_kind(scenario: str) -> None:
 
 def test_schedules_held_and_stale() -> None:
     """Probabilistic, every-n, held and stale perturbations split the copies step by step."""
-    spec = [
-        ObservationDisruptor(eps=0.1, schedule=Schedule(probability=0.5)),
-        ObservationDisruptor(
-            eps=0.05, timing="stale", name="stale_adversary", schedule=Schedule(every=2, hold=True)
-        ),
-        ObservationDisruptor(
-            eps=0.02, name="held_adversary", schedule=Schedule(every=3, hold=True)
-        ),
-        ActionDisruptor(mode="noisy", alpha=0.3, schedule=Schedule(probability=0.5, hold=True)),
-        RewardDisruptor(eps=0.3, schedule=Schedule.window(2, 9)),
-    ]
+    spec = split_schedules()
     play_both(_game("Hopper-v5", disruptors=spec), steps=90)
 
 

@@ -20,8 +20,8 @@ import pytest
 import advgame
 from advgame.core import array_rollout
 from advgame.core.episodes import EpisodeResult, build_policies, rollout, rollout_batch
-from advgame.core.schedule import Schedule
-from advgame.disruptors import ActionDisruptor, ObservationDisruptor, RewardDisruptor
+from advgame.disruptors import ActionDisruptor, ObservationDisruptor
+from tests._disruptor_helpers import split_schedules
 
 Make = Callable[[], advgame.Game]
 Policies = Callable[[advgame.Game], dict[str, Any]]
@@ -167,17 +167,7 @@ def test_dynamics_force_and_reward_adversaries(monkeypatch: pytest.MonkeyPatch) 
 
 def test_schedules_that_split_the_copies(monkeypatch: pytest.MonkeyPatch) -> None:
     """Probabilistic, every-n, held and stale perturbations: movers differ between copies."""
-    spec = [
-        ObservationDisruptor(eps=0.1, schedule=Schedule(probability=0.5)),
-        ObservationDisruptor(
-            eps=0.05, timing="stale", name="stale_adversary", schedule=Schedule(every=2, hold=True)
-        ),
-        ObservationDisruptor(
-            eps=0.02, name="held_adversary", schedule=Schedule(every=3, hold=True)
-        ),
-        ActionDisruptor(mode="noisy", alpha=0.3, schedule=Schedule(probability=0.5, hold=True)),
-        RewardDisruptor(eps=0.3, schedule=Schedule.window(2, 9)),
-    ]
+    spec = split_schedules()
     make = _game("Walker2d-v5", 120, disruptors=spec)
     _, groups = _three_ways([make] * 4, _jumpy(0.6), range(10, 14), monkeypatch)
     assert groups == [[0, 1, 2, 3]]

@@ -1,4 +1,4 @@
-"""Batched evaluation's array path: the all-live steps of alike episodes on `ArrayGame`s.
+"""Batched evaluation's array path: the all-live steps of alike episodes on `ArrayGame` objects.
 
 `advgame.core.episodes.rollout_batch` plays one episode in each of its games. After the games
 are reset and their policies reseeded, `play_arrays` splits them into groups of alike games
