@@ -28,7 +28,8 @@ drawn before timing, as the protagonist's are.
 The variants are interleaved for ``--rounds`` rounds of ``--chunk`` vector steps and each is
 compared with ``sync`` (or the raw env) of the same round. Printed: a calibration line
 (`benchmarks/calibrate.py`'s raw HalfCheetah step in µs, with the load average), then the
-median env-steps/s of the reference and the quartiles of each variant's per-round ratio to it,
+median env-steps/s of the reference and the quartiles of each variant's per-round ratio to it
+(and, where EnvPool ran, the array game's per-round ratio to EnvPool on as many threads),
 and for part 2 a second calibration line after it. ``--clock cpu`` times in the process's CPU
 time instead of wall time: on shared, loaded cores the ratios are then less noisy (time spent
 descheduled does not count), but caches are still shared, so they remain indications.
@@ -267,6 +268,11 @@ def main() -> None:
         )
         print(f"| {args.env} N | sync steps/s | " + " | ".join(k for k in rates if k != "sync"))
         print(_row(str(n), rates, "sync"))
+        for k in threads:  # the array game against EnvPool directly, round by round
+            a, e = rates.get(f"array-t{k}"), rates.get(f"envpool-t{k}")
+            if a and e:
+                ratios = [x / y for x, y in zip(a, e, strict=True)]
+                print(f"  array-t{k} / envpool-t{k}, per round: {quartiles(ratios)}")
     if args.single or args.single_only:
         single = {
             "raw": lambda: _Raw(args.env),

@@ -33,6 +33,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
@@ -40,7 +41,7 @@ from advgame.core.physics import ThreadedStepper, shared_stepper
 from advgame.core.task import ArrayResult, GymTask, StepResult
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 from advgame.scenarios.mujoco_formulas import FORMULAS, Formula, Outcome, Stacked
-from advgame.scenarios.mujoco_lean import lean_step
+from advgame.scenarios.mujoco_lean import lean_dt, lean_step
 
 __all__ = ["TASKS", "BatchedGymTask", "BatchedMujocoEnv", "batched_step", "step_envs"]
 
@@ -65,7 +66,10 @@ def step_envs(
     """
     env = envs[0]
     before = formula.before(Stacked(envs), env)
-    dt = np.array([e.dt for e in envs])
+    if type(env).dt is MujocoEnv.dt:  # Gymnasium's own property (one task: one env type)
+        dt = np.array([lean_dt(e) for e in envs])  # the same product, its options object kept
+    else:
+        dt = np.array([e.dt for e in envs])
     stepper.step(envs, actions, env.frame_skip, formula.contact_forces)
     return formula.after(Stacked(envs), env, before, actions, dt)
 

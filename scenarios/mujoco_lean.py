@@ -28,7 +28,7 @@ from gymnasium.envs.mujoco.hopper_v5 import HopperEnv
 from gymnasium.envs.mujoco.swimmer_v5 import SwimmerEnv
 from gymnasium.envs.mujoco.walker2d_v5 import Walker2dEnv
 
-__all__ = ["LEAN", "StepOutput", "lean_step"]
+__all__ = ["LEAN", "StepOutput", "lean_dt", "lean_step"]
 
 StepOutput = tuple[np.ndarray, Any, bool, bool, dict[str, Any]]
 """``(observation, reward, terminated, truncated, info)``, as ``env.step`` returns them."""
@@ -45,7 +45,7 @@ def _advance(env: Any, action: np.ndarray) -> None:
     _post_constraint(model, data)
 
 
-def _dt(env: Any) -> float:
+def lean_dt(env: Any) -> float:
     """``env.dt``: ``model.opt.timestep * frame_skip``, the same product.
 
     The model's options object (a view of the model's own memory: an edited timestep shows)
@@ -84,7 +84,7 @@ def _cheetah(env: Any, action: np.ndarray) -> StepOutput:
     x_before = data.qpos[0]
     _advance(env, action)
     x_after = data.qpos[0]
-    x_velocity = (x_after - x_before) / _dt(env)
+    x_velocity = (x_after - x_before) / lean_dt(env)
     forward = env._forward_reward_weight * x_velocity
     ctrl = _ctrl_cost(env, action)
     info = {
@@ -102,7 +102,7 @@ def _planar_walker(env: Any, action: np.ndarray) -> StepOutput:
     x_before = data.qpos[0]
     _advance(env, action)
     x_after = data.qpos[0]
-    x_velocity = (x_after - x_before) / _dt(env)
+    x_velocity = (x_after - x_before) / lean_dt(env)
     observation = _positions_velocities(env, data, 1, clip=10.0)
     forward = env._forward_reward_weight * x_velocity
     healthy = env.is_healthy
@@ -125,7 +125,7 @@ def _swimmer(env: Any, action: np.ndarray) -> StepOutput:
     xy_before = data.qpos[0:2].copy()
     _advance(env, action)
     xy_after = data.qpos[0:2].copy()
-    x_velocity, y_velocity = (xy_after - xy_before) / _dt(env)
+    x_velocity, y_velocity = (xy_after - xy_before) / lean_dt(env)
     forward = env._forward_reward_weight * x_velocity
     ctrl = _ctrl_cost(env, action)
     info = {
@@ -146,7 +146,7 @@ def _ant(env: Any, action: np.ndarray) -> StepOutput:
     xy_before = body.xpos[:2].copy()
     _advance(env, action)
     xy_after = data.body(env._main_body).xpos[:2].copy()
-    x_velocity, y_velocity = (xy_after - xy_before) / _dt(env)
+    x_velocity, y_velocity = (xy_after - xy_before) / lean_dt(env)
     observation = env._get_obs()
     forward = x_velocity * env._forward_reward_weight
     healthy = env.is_healthy
