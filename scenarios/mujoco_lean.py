@@ -17,6 +17,7 @@ keyword arguments varied, against ``env.step``.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -185,15 +186,19 @@ def lean_step(env: Any) -> Callable[[np.ndarray], StepOutput] | None:
     The function takes the action (a float array of the action space's shape; any other shape
     goes to ``env.step``, which raises its own error) and returns what ``env.step`` returns.
     An env that renders to a window (``render_mode="human"``) draws inside its own step: None.
+    The function is a `functools.partial` of module-level functions over `env`, so it copies
+    and pickles along with the env (a closure would keep stepping the original).
     """
     fn = LEAN.get(type(env))
     if fn is None or getattr(env, "render_mode", None) == "human":
         return None
-    shape = (env.model.nu,)
+    return functools.partial(_checked, fn, env, (env.model.nu,))
 
-    def step(action: np.ndarray) -> StepOutput:
-        if getattr(action, "shape", None) != shape:
-            return env.step(action)
-        return fn(env, action)
 
-    return step
+def _checked(
+    fn: Callable[[Any, np.ndarray], StepOutput], env: Any, shape: tuple[int], action: Any
+) -> StepOutput:
+    """``fn(env, action)`` for an action of the right `shape`; ``env.step(action)`` otherwise."""
+    if getattr(action, "shape", None) != shape:
+        return env.step(action)
+    return fn(env, action)

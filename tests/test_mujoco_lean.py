@@ -127,3 +127,17 @@ def test_the_lean_step_follows_an_edited_timestep_and_a_swapped_model() -> None:
         for _ in range(5):
             expected, got = plain.step(action), lean(action)
             assert _same(expected[4], got[4]) and _same(expected[1], got[1])  # x_velocity: dt
+
+
+def test_a_copied_lean_step_steps_its_own_env() -> None:
+    import copy
+
+    env = gym.make("Hopper-v5").unwrapped
+    env.reset(seed=0)
+    lean = lean_step(env)
+    assert lean is not None
+    twin_env, twin_lean = copy.deepcopy((env, lean))
+    before = env.data.qpos.copy()
+    twin_lean(np.ones(3, np.float32))
+    assert np.array_equal(env.data.qpos, before)  # the original did not move
+    assert not np.array_equal(twin_env.data.qpos, before)  # the copy did
