@@ -242,6 +242,20 @@ class ArrayGame(ArrayMoves):
         """Copies in which adversary `agent`'s action counts this step ``[N]`` (a copy)."""
         return self._active[agent].copy()
 
+    def rows_of(self, agent: str, idx: Sequence[int] | np.ndarray, answers: Sequence[Any]) -> Any:
+        """`agent`'s actions for a move from the answers of copies `idx` (in increasing order).
+
+        When every copy answered, `answers` as they are; otherwise ``[N, ...]`` float64 with
+        each answer in its copy's row and zeros in the others, which the move ignores (the
+        agent does not act there).
+        """
+        if len(idx) == self.n:
+            return answers
+        shape = self.games[0].action_space(agent).shape or ()
+        full = np.zeros((self.n, *shape), np.float64)
+        full[np.asarray(idx, np.intp)] = np.asarray(answers, np.float64)
+        return full
+
     def close(self) -> None:
         """Close every copy."""
         for g in self.games:

@@ -231,14 +231,8 @@ def _ask(
     out: list[dict[str, Any]] = []
     for (array, _), mine in zip(runs, got, strict=True):
         actions: dict[str, Any] = {}
-        for a, by_row in mine.items():
-            if len(by_row) == array.n:
-                actions[a] = [by_row[i] for i in range(array.n)]
-                continue
-            shape = array.games[0].action_space(a).shape or ()
-            full = np.zeros((array.n, *shape), np.float64)
-            for i, action in by_row.items():
-                full[i] = action
-            actions[a] = full
+        for a, by_row in mine.items():  # rows of several batch keys may come in any order
+            idx = sorted(by_row)
+            actions[a] = array.rows_of(a, idx, [by_row[i] for i in idx])
         out.append(actions)
     return out

@@ -118,13 +118,7 @@ class ArrayPath:
             answers = act_batch(
                 [self.views[i].policies[a] for i in idx], [obs[i] for i in idx], self.exact
             )
-            if len(idx) == game.n:
-                out[a] = answers
-                continue
-            shape = game.games[0].action_space(a).shape or ()
-            full = np.zeros((game.n, *shape), np.float64)
-            full[idx] = np.asarray(answers, np.float64)
-            out[a] = full
+            out[a] = game.rows_of(a, idx, answers)
         return out
 
     def _results(
