@@ -68,7 +68,16 @@ def _ctrl_cost(env: Any, action: np.ndarray) -> Any:
     The action is 1-D (`lean_step` checks its shape), so the reduction along its one axis is
     ``np.sum``'s over all entries; passing no ``axis`` keyword halves the call's cost.
     """
-    return env._ctrl_cost_weight * _add(_square(action))
+    total, weight = _add(_square(action)), env._ctrl_cost_weight
+    if _WIDENS and type(total) is np.float32 and type(weight) is float:
+        # NumPy 1 widens a float32 scalar times a Python float to float64: the same double
+        # product as below, without its mixed-scalar dispatch (~1.3 of ~1.6 µs, measured)
+        return np.float64(weight * float(total))
+    return weight * total
+
+
+_WIDENS = type(0.5 * np.float32(1.0)) is np.float64
+"""Whether a Python float times a float32 scalar is float64 here (NumPy 1; NumPy 2: float32)."""
 
 
 def _positions_velocities(env: Any, data: Any, skip: int, clip: float | None = None) -> np.ndarray:

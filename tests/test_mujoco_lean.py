@@ -141,3 +141,19 @@ def test_a_copied_lean_step_steps_its_own_env() -> None:
     twin_lean(np.ones(3, np.float32))
     assert np.array_equal(env.data.qpos, before)  # the original did not move
     assert not np.array_equal(twin_env.data.qpos, before)  # the copy did
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_control_cost_is_numpys_product_in_value_and_type(dtype: type) -> None:
+    """The float32 shortcut (`_ctrl_cost` without NumPy's mixed-scalar dispatch) is exact."""
+    from types import SimpleNamespace
+
+    from advgame.scenarios.mujoco_lean import _ctrl_cost
+
+    rng = np.random.default_rng(3)
+    for weight in (0.1, 0.3, 1e-3, 1.0 / 3.0, 7.0, 0.0, 2, np.float64(0.1)):
+        for _ in range(200):
+            action = rng.uniform(-3, 3, 6).astype(dtype)
+            expected = weight * np.sum(np.square(action))
+            got = _ctrl_cost(SimpleNamespace(_ctrl_cost_weight=weight), action)
+            assert type(got) is type(expected) and got == expected, (weight, action)
