@@ -8,7 +8,11 @@ random actions (drawn before timing), for N in ``--n`` (default 8, 16, 64):
   the same envs bit for bit, observations/rewards/infos computed over ``[N, ...]``.
 * ``stepper-tK``: the batched env's physics alone (`advgame.core.physics.ThreadedStepper`:
   controls set, ``mj_step`` on K threads; no observations, rewards or infos), so that
-  ``batch-tK`` minus it is the NumPy side's cost.
+  ``batch-tK`` minus it is the NumPy side's cost. Each thread's share is one compiled call
+  (`advgame.core.native_step`) where numba is installed.
+* ``bindings-tK``: the same stepper with ``native=False``: a Python loop of MuJoCo's bindings,
+  one call (and one GIL hand-off) per env; ``stepper-tK / bindings-tK`` is the compiled loop's
+  gain (its per-round ratio is printed).
 * ``game-tK``: `advgame.core.vector.VectorView` of N protagonist views of preset ``default``
   with `RandomAdversary` observation and action adversaries (three agents, two moves per
   step, budgets checked), K simulator threads (``ADVGAME_PHYSICS_THREADS``): the batched game.
@@ -83,11 +87,11 @@ class _Rollout:
 class _Stepper:
     """The exact physics alone: `ThreadedStepper` over N unwrapped envs, nothing computed after."""
 
-    def __init__(self, env_id: str, n: int, threads: int) -> None:
+    def __init__(self, env_id: str, n: int, threads: int, native: bool = True) -> None:
         self.envs = [gym.make(env_id).unwrapped for _ in range(n)]
         for i, env in enumerate(self.envs):
             env.reset(seed=i)
-        self.stepper = ThreadedStepper(threads)
+        self.stepper = ThreadedStepper(threads, native=native)
         self.frame_skip = self.envs[0].frame_skip
 
     def step(self, actions: np.ndarray) -> None:
@@ -137,6 +141,7 @@ def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[],
         out[f"batch-t{k}"] = lambda k=k: BatchedMujocoEnv(env_id, n, threads=k)
     for k in threads:
         out[f"stepper-t{k}"] = lambda k=k: _Stepper(env_id, n, k)
+        out[f"bindings-t{k}"] = lambda k=k: _Stepper(env_id, n, k, native=False)
     for k in threads:
         out[f"game-t{k}"] = lambda k=k: GameViews(env_id, n, k)
     try:
@@ -199,6 +204,11 @@ def main() -> None:
             if key != "sync"
         ]
         print(f"| {n} | {statistics.median(rates['sync']):.0f} | " + " | ".join(cells) + " |")
+        for k in threads:  # the compiled loop against the bindings' loop, round by round
+            ratios = [
+                a / b for a, b in zip(rates[f"stepper-t{k}"], rates[f"bindings-t{k}"], strict=True)
+            ]
+            print(f"  N={n} stepper-t{k} / bindings-t{k}, per round: {quartiles(ratios)}")
 
 
 if __name__ == "__main__":

@@ -65,13 +65,23 @@ def step_envs(
 
     """
     env = envs[0]
-    before = formula.before(Stacked(envs), env)
     if type(env).dt is MujocoEnv.dt:  # Gymnasium's own property (one task: one env type)
         dt = np.array([lean_dt(e) for e in envs])  # the same product, its options object kept
     else:
         dt = np.array([e.dt for e in envs])
-    stepper.step(envs, actions, env.frame_skip, formula.contact_forces)
-    return formula.after(Stacked(envs), env, before, actions, dt)
+    # a `before` that reads only fields the stepping loop can read for it runs on them after
+    # the step; any other reads every env first
+    early = None if formula.reads_before else formula.before(Stacked(envs), env)
+    got = stepper.step(
+        envs,
+        actions,
+        env.frame_skip,
+        formula.contact_forces,
+        before=formula.reads_before,
+        after=formula.reads_after,
+    )
+    before = formula.before(Stacked(envs, got.before), env) if formula.reads_before else early
+    return formula.after(Stacked(envs, got.after), env, before, actions, dt)
 
 
 def batched_step(

@@ -31,11 +31,14 @@ class Stacked:
 
     Args:
         envs: the envs to read (objects with a live ``data``), in row order.
+        known: fields already stacked (``{"qpos": [N, nq]}``), taken as they are.
 
     """
 
-    def __init__(self, envs: Sequence[Any]) -> None:
+    def __init__(self, envs: Sequence[Any], known: dict[str, np.ndarray] | None = None) -> None:
         self._envs = envs
+        if known:  # fields already read (by the stepper, env by env): not read again
+            self.__dict__.update(known)
 
     def __getattr__(self, field: str) -> np.ndarray:
         if field.startswith("_"):
@@ -324,22 +327,36 @@ class Formula:
         after: observations, rewards, terminations and info arrays after the substeps.
         contact_forces: whether ``after`` reads ``cfrc_ext`` (so ``mj_rnePostConstraint``
             must run after the substeps).
+        reads_before: every ``MjData`` field ``before`` reads, when it reads nothing else:
+            the stepper then reads them env by env in its stepping loop
+            (`advgame.core.physics.ThreadedStepper.step`) and ``before`` runs on those rows
+            after the step; empty: ``before`` runs on the envs before the step.
+        reads_after: ``MjData`` fields ``after`` reads that the stepping loop reads for it
+            (a field not listed is still read, from the envs, after the loop).
 
     """
 
     before: Callable[[Stacked, Any], Any]
     after: Callable[[Stacked, Any, Any, np.ndarray, np.ndarray], Outcome]
     contact_forces: bool = False
+    reads_before: tuple[str, ...] = ()
+    reads_after: tuple[str, ...] = ()
 
+
+_Q, _QV = ("qpos",), ("qpos", "qvel")
 
 FORMULAS: dict[str, Formula] = {
-    "HalfCheetah-v5": Formula(_x, _cheetah),
-    "Hopper-v5": Formula(_x, functools.partial(_planar_walker, hopper=True)),
-    "Walker2d-v5": Formula(_x, functools.partial(_planar_walker, hopper=False)),
-    "Swimmer-v5": Formula(_xy, _swimmer),
-    "Ant-v5": Formula(_body_xy, _ant, contact_forces=True),
-    "Humanoid-v5": Formula(_mass_centre, _humanoid, contact_forces=True),
-    "HumanoidStandup-v5": Formula(_none, _standup, contact_forces=True),
+    "HalfCheetah-v5": Formula(_x, _cheetah, reads_before=_Q, reads_after=_QV),
+    "Hopper-v5": Formula(
+        _x, functools.partial(_planar_walker, hopper=True), reads_before=_Q, reads_after=_QV
+    ),
+    "Walker2d-v5": Formula(
+        _x, functools.partial(_planar_walker, hopper=False), reads_before=_Q, reads_after=_QV
+    ),
+    "Swimmer-v5": Formula(_xy, _swimmer, reads_before=_Q, reads_after=_QV),
+    "Ant-v5": Formula(_body_xy, _ant, contact_forces=True, reads_after=(*_QV, "cfrc_ext")),
+    "Humanoid-v5": Formula(_mass_centre, _humanoid, contact_forces=True, reads_after=_QV),
+    "HumanoidStandup-v5": Formula(_none, _standup, contact_forces=True, reads_after=_QV),
     "InvertedPendulum-v5": Formula(_none, _pendulum),
     "InvertedDoublePendulum-v5": Formula(_none, _double_pendulum),
     "Reacher-v5": Formula(_none, _reacher),

@@ -240,7 +240,7 @@ def test_a_slow_first_step_does_not_split_a_cheap_batch_for_good(
         run(*args)
 
     monkeypatch.setattr(ThreadedStepper, "_run", staticmethod(slow_once))
-    stepper = ThreadedStepper(2)
+    stepper = ThreadedStepper(2, native=False)  # the loop patched above
     for _ in range(3 * ThreadedStepper.PROBES):
         stepper.step(envs, np.zeros((4, 6)), nstep=4)
     assert stepper._pool is None

@@ -16,22 +16,28 @@ contact and, the dynamics being chaotic, visibly within an episode (measured on 
 1e-17 in ``qpos`` after 25 moves). It also returns no ``cfrc_ext``/``cinert``/``cvel``, which
 Ant and the Humanoids observe. `benchmarks/bench_batch_physics.py` measures both paths side
 by side.
+
+Where numba is installed, each thread runs its share of the loop as one compiled call that holds
+no GIL (`advgame.core.native_step`): the same C calls, so the same bits, without a GIL hand-off
+per env.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from advgame.core.native_step import BatchPointers, PointerCache, native_loop
 from advgame.errors import ConfigError
 
-__all__ = ["THREADS_VAR", "ThreadedStepper", "default_threads", "shared_stepper"]
+__all__ = ["THREADS_VAR", "Gathered", "ThreadedStepper", "default_threads", "shared_stepper"]
 
 THREADS_VAR = "ADVGAME_PHYSICS_THREADS"
 """Environment variable that caps the simulator threads of batched steps (pool workers set 1)."""
@@ -50,6 +56,19 @@ def default_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+class Gathered(NamedTuple):
+    """The ``MjData`` fields a `ThreadedStepper.step` read from each env as it stepped them.
+
+    Attributes:
+        before: ``{field: [N, ...]}``, row ``k`` read from env ``k`` just before its substeps.
+        after: the same, read just after them (and ``mj_rnePostConstraint``).
+
+    """
+
+    before: dict[str, np.ndarray]
+    after: dict[str, np.ndarray]
+
+
 class ThreadedStepper:
     """Advance MuJoCo simulations `nstep` substeps each, split over `threads` threads.
 
@@ -66,12 +85,17 @@ class ThreadedStepper:
         threads: simulator threads (``None``: `default_threads`), the calling thread included:
             it steps the first share of the envs while ``threads - 1`` pool threads step the
             rest. With 1 every env is stepped on the calling thread.
+        native: step each thread's share as one compiled call that holds no GIL, where it can
+            be built (`advgame.core.native_step`: the same C calls, the same bits); ``False``
+            keeps the bindings' Python loop.
 
     Example:
         >>> import gymnasium as gym, numpy as np
         >>> envs = [gym.make("Hopper-v5").unwrapped for _ in range(2)]
         >>> stepper = ThreadedStepper(threads=1)
-        >>> stepper.step(envs, np.zeros((2, 3)), nstep=4)
+        >>> got = stepper.step(envs, np.zeros((2, 3)), nstep=4, after=("qpos",))
+        >>> got.after["qpos"].shape
+        (2, 6)
         >>> stepper.close()
 
     """
@@ -90,17 +114,20 @@ class ThreadedStepper:
     REPROBE = 512
     """A split kind is measured on the calling thread again once in this many steps."""
 
-    def __init__(self, threads: int | None = None) -> None:
+    def __init__(self, threads: int | None = None, native: bool = True) -> None:
         if threads is None:
             threads = default_threads()
         if not isinstance(threads, int) or isinstance(threads, bool) or threads < 1:
             raise ConfigError(f"threads must be a positive integer; got {threads!r}.")
         self.threads = threads
         """The most threads a step uses (a step of fewer envs, or of cheap ones, uses fewer)."""
+        self.native = native
+        """Whether steps use the compiled loop where it can be built."""
         self._pool: ThreadPoolExecutor | None = None
         self._pid = os.getpid()
         self._cost: dict[tuple[int, ...], float] = {}  # cheapest seconds per env step, one thread
         self._calls: dict[tuple[int, ...], int] = {}  # steps of each kind so far
+        self._pointers = PointerCache()
 
     def step(
         self,
@@ -108,7 +135,9 @@ class ThreadedStepper:
         ctrl: np.ndarray,
         nstep: int,
         post_constraint: bool = True,
-    ) -> None:
+        before: Sequence[str] = (),
+        after: Sequence[str] = (),
+    ) -> Gathered:
         """Set ``ctrl[k]`` as the controls of ``owners[k]`` and step each `nstep` substeps.
 
         Args:
@@ -119,13 +148,27 @@ class ThreadedStepper:
             nstep: substeps per env (the task's ``frame_skip``).
             post_constraint: also call ``mj_rnePostConstraint`` after the substeps (Gymnasium
                 does, and ``cfrc_ext`` needs it); the state does not depend on it.
+            before: ``MjData`` fields to read from each env just before its substeps.
+            after: ``MjData`` fields to read from each env just after them.
+
+        Returns:
+            the fields read, ``[N, ...]`` each, row ``k`` from ``owners[k]`` (`Gathered`): read
+            in the stepping loop, env by env, so that on the compiled loop reading them costs
+            no Python per env.
 
         """
         n = len(owners)
+        run: Callable[..., None] = self._run
+        gathered = Gathered({}, {})
+        loop = native_loop() if n and self.native else None
+        if loop is not None:
+            run = self._native(loop, owners, ctrl, before, after, gathered) or run
+        if run is self._run:
+            gathered = _allocate(owners, before, after)
         parts = min(self.threads, n)
         if parts < 2:
-            self._run(owners, ctrl, nstep, post_constraint, 0, n)
-            return
+            run(owners, ctrl, nstep, post_constraint, 0, n, gathered)
+            return gathered
         model = owners[0].model
         key = (model.nq, model.nv, model.nbody, model.ngeom, model.nu, nstep)
         cost, calls = self._cost.get(key), self._calls.get(key, 0)
@@ -137,42 +180,126 @@ class ThreadedStepper:
             or cost * n < self.MIN_BATCH_SECONDS
         ):  # measure, on this thread
             start = time.perf_counter()
-            self._run(owners, ctrl, nstep, post_constraint, 0, n)
+            run(owners, ctrl, nstep, post_constraint, 0, n, gathered)
             seen = (time.perf_counter() - start) / n
             self._cost[key] = seen if cost is None else min(cost, seen)
-            return
+            return gathered
         if self._pool is None or self._pid != os.getpid():  # a forked child has no threads
             self._pid = os.getpid()
             self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="advgame-physics")
         bounds = [int(b) for b in np.linspace(0, n, parts + 1)]
         futures = [
-            self._pool.submit(self._run, owners, ctrl, nstep, post_constraint, lo, hi)
+            self._pool.submit(run, owners, ctrl, nstep, post_constraint, lo, hi, gathered)
             for lo, hi in itertools.pairwise(bounds[1:])
         ]
-        self._run(owners, ctrl, nstep, post_constraint, 0, bounds[1])  # the caller's share
+        run(owners, ctrl, nstep, post_constraint, 0, bounds[1], gathered)  # the caller's share
         for future in futures:
             future.result()
+        return gathered
+
+    def _native(
+        self,
+        loop: Callable[..., None],
+        owners: Sequence[Any],
+        ctrl: np.ndarray,
+        before: Sequence[str],
+        after: Sequence[str],
+        gathered: Gathered,
+    ) -> Callable[..., None] | None:
+        """The compiled loop bound to this batch's addresses, with `gathered`'s rows allocated.
+
+        ``None`` where it cannot step the batch (controls of differing sizes, a field that is not
+        plain float64): the bindings' loop does then.
+        """
+        pointers = self._pointers.get(owners)
+        src = np.ascontiguousarray(ctrl, dtype=np.float64)
+        if src.shape != (len(owners), pointers.nu):
+            return None
+        lists = []
+        for names, out in ((before, gathered.before), (after, gathered.after)):
+            sources, outputs, sizes = [], [], []
+            for name in names:
+                found = pointers.field(name)
+                if found is None:
+                    return None
+                addresses, shape = found
+                out[name] = rows = np.empty((len(owners), *shape))
+                sources.append(addresses)
+                outputs.append(rows.ctypes.data)
+                sizes.append(rows[0].size if len(rows) else 0)
+            lists.append(
+                (
+                    np.array(sources, np.uint64).reshape(len(names), len(owners)),
+                    np.array(outputs, np.uint64),
+                    np.array(sizes, np.int64),
+                )
+            )
+        return functools.partial(_run_native, loop, pointers, src, pointers.nu, lists[0], lists[1])
 
     @staticmethod
     def _run(
-        owners: Sequence[Any], ctrl: np.ndarray, nstep: int, post: bool, lo: int, hi: int
+        owners: Sequence[Any],
+        ctrl: np.ndarray,
+        nstep: int,
+        post: bool,
+        lo: int,
+        hi: int,
+        gathered: Gathered,
     ) -> None:
         import mujoco
 
         step, post_constraint = mujoco.mj_step, mujoco.mj_rnePostConstraint
+        before, after = tuple(gathered.before.items()), tuple(gathered.after.items())
         for k in range(lo, hi):
             owner = owners[k]
             model, data = owner.model, owner.data
+            for name, out in before:
+                out[k] = getattr(data, name)
             data.ctrl[:] = ctrl[k]
             step(model, data, nstep)
             if post:
                 post_constraint(model, data)
+            for name, out in after:
+                out[k] = getattr(data, name)
 
     def close(self) -> None:
         """Stop the threads (idempotent; a later step starts them again)."""
         if self._pool is not None:
             self._pool.shutdown(wait=True)
             self._pool = None
+
+
+def _run_native(
+    loop: Callable[..., None],
+    pointers: BatchPointers,
+    src: np.ndarray,
+    nu: int,
+    pre: tuple[np.ndarray, ...],
+    post_fields: tuple[np.ndarray, ...],
+    owners: Sequence[Any],
+    ctrl: np.ndarray,
+    nstep: int,
+    post: bool,
+    lo: int,
+    hi: int,
+    gathered: Gathered,
+) -> None:
+    """`ThreadedStepper._run`'s loop, fields read included, as one compiled call."""
+    p = pointers
+    loop(p.models, p.datas, p.ctrls, src, nu, nstep, post, lo, hi, pre, post_fields)
+
+
+def _allocate(owners: Sequence[Any], before: Sequence[str], after: Sequence[str]) -> Gathered:
+    """Empty ``[N, ...]`` rows for the fields the bindings' loop reads, shaped as env 0's."""
+
+    def rows(names: Sequence[str]) -> dict[str, np.ndarray]:
+        out = {}
+        for name in names:
+            field = np.asarray(getattr(owners[0].data, name))
+            out[name] = np.empty((len(owners), *field.shape), field.dtype)
+        return out
+
+    return Gathered(rows(before), rows(after)) if owners else Gathered({}, {})
 
 
 _SHARED: dict[int, ThreadedStepper] = {}
