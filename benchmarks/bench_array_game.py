@@ -11,6 +11,10 @@ Part 1, N copies of a MuJoCo v5 task (``--env``, default HalfCheetah-v5) for N i
   uniformly random observation and action adversaries (drawn before timing, as the protagonist's
   actions are; a sense and an act call per step, budgets checked, clips counted, finished copies
   reset), K simulator threads.
+* ``array-bindings-tK`` (with ``--bindings``): the same array game with its simulator stepped
+  by MuJoCo's Python bindings, one call per copy (``ThreadedStepper(native=False)``), instead
+  of the compiled loop (`advgame.core.native_step`); its per-round ratio to ``array-tK`` is
+  printed.
 * ``view-tK``: `advgame.core.vector.VectorView` of N protagonist views of the same games with
   `RandomAdversary` policies embedded (what training steps; on the array game).
 * ``lockstep-tK``: the same `VectorView` on its lockstep path (``array=False``: before the array
@@ -55,6 +59,7 @@ from calibrate import step_us
 
 import advgame
 from advgame.core.array_game import ArrayGame
+from advgame.core.physics import shared_stepper
 
 ADVERSARIES = ("observation_adversary", "action_adversary")
 
@@ -66,10 +71,11 @@ class _Array:
     as the protagonist's are: the ratio is the game's own cost, not a policy's.
     """
 
-    def __init__(self, env_id: str, n: int, threads: int) -> None:
+    def __init__(self, env_id: str, n: int, threads: int, native: bool = True) -> None:
         self.game = ArrayGame(
             [advgame.make(env_id, preset="default") for _ in range(n)], threads=threads
         )
+        self.stepper, self.native = shared_stepper(threads), native
         rng = np.random.default_rng(1)
         sizes = {a: (n, *self.game.games[0].action_space(a).shape) for a in ADVERSARIES}
         self.pool = [{a: rng.uniform(-1, 1, s) for a, s in sizes.items()} for _ in range(97)]
@@ -82,6 +88,7 @@ class _Array:
     def step(self, actions: np.ndarray) -> None:
         game, drawn = self.game, self.pool[self.i]
         self.i = (self.i + 1) % len(self.pool)
+        self.stepper.native = self.native  # the process's stepper: this variant's loop
         game.sense({"observation_adversary": drawn["observation_adversary"]})
         game.act({"protagonist": actions, "action_adversary": drawn["action_adversary"]})
         if game.done.any():
@@ -178,13 +185,17 @@ class _Floor:
             env.close()
 
 
-def _variants(env_id: str, n: int, threads: list[int]) -> dict[str, Callable[[], Any]]:
+def _variants(
+    env_id: str, n: int, threads: list[int], bindings: bool = False
+) -> dict[str, Callable[[], Any]]:
     out: dict[str, Callable[[], Any]] = {
         "sync": lambda: gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n),
         "floor": functools.partial(_Floor, env_id, n),
     }
     for k in threads:
         out[f"array-t{k}"] = functools.partial(_Array, env_id, n, k)
+        if bindings and n > 1:
+            out[f"array-bindings-t{k}"] = functools.partial(_Array, env_id, n, k, False)
         if n > 1:
             out[f"view-t{k}"] = functools.partial(GameViews, env_id, n, k, array=True)
             out[f"lockstep-t{k}"] = functools.partial(GameViews, env_id, n, k, array=False)
@@ -249,6 +260,12 @@ def main() -> None:
     parser.add_argument("--chunk", type=int, default=50, help="vector steps per segment")
     parser.add_argument("--no-single", dest="single", action="store_false")
     parser.add_argument(
+        "--bindings",
+        action="store_true",
+        help="add array-bindings-tK: the array game with the simulator stepped by MuJoCo's "
+        "Python bindings, one call per copy, instead of the compiled loop",
+    )
+    parser.add_argument(
         "--single-only", action="store_true", help="only part 2, the single game vs the raw env"
     )
     parser.add_argument(
@@ -263,9 +280,8 @@ def main() -> None:
     threads = [int(k) for k in args.threads.split(",")]
     _calibrate(args.clock)
     for n in [] if args.single_only else [int(x) for x in args.n.split(",")]:
-        rates = measure(
-            _variants(args.env, n, threads), args.env, n, args.rounds, args.chunk, clock
-        )
+        variants = _variants(args.env, n, threads, args.bindings)
+        rates = measure(variants, args.env, n, args.rounds, args.chunk, clock)
         print(f"| {args.env} N | sync steps/s | " + " | ".join(k for k in rates if k != "sync"))
         print(_row(str(n), rates, "sync"))
         for k in threads:  # the array game against EnvPool directly, round by round
@@ -273,6 +289,10 @@ def main() -> None:
             if a and e:
                 ratios = [x / y for x, y in zip(a, e, strict=True)]
                 print(f"  array-t{k} / envpool-t{k}, per round: {quartiles(ratios)}")
+            b = rates.get(f"array-bindings-t{k}")
+            if a and b:
+                ratios = [x / y for x, y in zip(a, b, strict=True)]
+                print(f"  array-t{k} / array-bindings-t{k}, per round: {quartiles(ratios)}")
     if args.single or args.single_only:
         single = {
             "raw": lambda: _Raw(args.env),

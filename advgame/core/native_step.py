@@ -8,11 +8,14 @@ calls MuJoCo's own C functions (``mju_copy`` for the controls, ``mj_step`` ``nst
 ``mj_rnePostConstraint``) from the library the bindings loaded, on the envs' own ``mjModel`` and
 ``mjData`` (their ``_address``). The C calls are the bindings' calls in the same order on the
 same memory, so every env evolves bit for bit as through the bindings
-(``tests/test_mujoco_batch.py`` runs both loops side by side).
+(``tests/test_native_step.py`` runs both loops side by side).
 
-Measured (`benchmarks/bench_batch_physics.py`, paired rounds on the 2-core VM, 7 Dec 2026): the
-compiled loop steps 64 HalfCheetah-v5 envs 1.10 times as fast as the bindings' loop on one
-thread and 1.13 times on two; 8 envs 1.04 / 1.13; 64 Hopper-v5 envs 1.05 / 1.06.
+Measured on the 2-core VM (7 Dec 2026, training stopped, per-round ratios, median of 10-15
+rounds): the physics alone (`benchmarks/bench_batch_physics.py`, ``stepper-tK / bindings-tK``)
+1.03 / 1.02 at 8 HalfCheetah-v5 envs on one / two threads, 1.04 / 1.05 at 64; the array game
+with its adversaries (`benchmarks/bench_array_game.py --bindings`, the fields read in the loop
+too) 1.00 / 1.00 at 8 copies, 1.04 / 1.13 at 64. The gain is where two threads hand the GIL to
+each other once per env.
 
 When it is not used: numba is not importable (it is not a core dependency; the ``robosuite``
 extra, and so ``.[all]``, installs it), the library cannot be found next to the bindings, or the
@@ -39,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["NATIVE_VAR", "BatchPointers", "PointerCache", "native_loop"]
+__all__ = ["NATIVE_VAR", "BatchPointers", "Layout", "PointerCache", "native_loop"]
 
 NATIVE_VAR = "ADVGAME_NATIVE_STEP"
 """Environment variable: ``0`` keeps the bindings' Python loop (the compiled loop is the default)."""
@@ -55,9 +58,10 @@ def native_loop() -> Callable[..., None] | None:
     doubles at ``ctrls[k]``, steps ``(models[k], datas[k])`` `nstep` times, calls
     ``mj_rnePostConstraint`` if `post`, and copies the fields of `post_fields`. ``models``,
     ``datas`` and ``ctrls`` are uint64 arrays of addresses (``MjModel._address``,
-    ``MjData._address``, ``data.ctrl.ctypes.data``); a field list is ``(sources, outputs,
-    sizes)``: uint64 ``[F, N]`` addresses of each env's field, uint64 ``[F]`` addresses of
-    C-contiguous float64 ``[N, size]`` outputs, int64 ``[F]`` doubles per env.
+    ``MjData._address``, ``data.ctrl.ctypes.data``); a field list is ``(sources, block, offsets,
+    sizes)``, as `Layout.arguments` gives it: uint64 ``[F, N]`` addresses of each env's
+    field, the float64 block the rows go to, and int64 ``[F]`` offsets and sizes (doubles per
+    env) of the fields in it.
     """
     if os.environ.get(NATIVE_VAR, "").strip() == "0":
         return None
@@ -99,22 +103,24 @@ def _compile(numba: Any, library: Any) -> Callable[..., None]:
     copy.argtypes, copy.restype = [u64, u64, ctypes.c_int], None
 
     @numba.njit(nogil=True, cache=False)
-    def fields(k, sources, outputs, sizes):
+    def fields(k, sources, block, offsets, sizes):
+        # field f of env k goes to row k of the field's [N, size] part of the block
+        n = sources.shape[1]
         for f in range(sources.shape[0]):
-            copy(outputs[f] + k * sizes[f] * 8, sources[f, k], sizes[f])
+            copy(block.ctypes.data + (offsets[f] * n + k * sizes[f]) * 8, sources[f, k], sizes[f])
 
     @numba.njit(nogil=True, cache=False)
     def loop(models, datas, ctrls, src, nu, nstep, post, lo, hi, pre, post_fields):
         base = src.ctypes.data
         row = nu * 8  # float64 bytes per row
         for k in range(lo, hi):
-            fields(k, pre[0], pre[1], pre[2])
+            fields(k, pre[0], pre[1], pre[2], pre[3])
             copy(ctrls[k], base + k * row, nu)
             for _ in range(nstep):
                 mj_step(models[k], datas[k])
             if post:
                 post_constraint(models[k], datas[k])
-            fields(k, post_fields[0], post_fields[1], post_fields[2])
+            fields(k, post_fields[0], post_fields[1], post_fields[2], post_fields[3])
 
     return loop
 
@@ -141,24 +147,60 @@ class BatchPointers:
         self.ctrls = np.array([d.ctrl.ctypes.data for _, d in pairs], np.uint64)
         sizes = {len(d.ctrl) for _, d in pairs}
         self.nu = sizes.pop() if len(sizes) == 1 else -1
-        self._fields: dict[str, tuple[np.ndarray, tuple[int, ...]] | None] = {}
+        self._layouts: dict[tuple[str, ...], Layout | None] = {}
 
-    def field(self, name: str) -> tuple[np.ndarray, tuple[int, ...]] | None:
-        """uint64 ``[N]`` addresses of every env's ``data.<name>`` and its shape, or ``None``.
+    def layout(self, names: tuple[str, ...]) -> Layout | None:
+        """Where the loop reads `names` from in every env (made once per tuple of names).
 
-        ``None`` when the field is not a C-contiguous float64 array of one shape in every env
-        (the loop copies doubles only): the bindings' loop then reads it.
+        ``None`` when a field is not a C-contiguous float64 array of one shape in every env
+        (the loop copies doubles only): the bindings' loop then reads the batch.
         """
-        if name not in self._fields:
-            arrays = [getattr(d, name) for _, d in self.pairs]
-            shapes = {a.shape for a in arrays}
-            plain = all(a.dtype == np.float64 and a.flags.c_contiguous for a in arrays)
-            self._fields[name] = (
-                (np.array([a.ctypes.data for a in arrays], np.uint64), shapes.pop())
-                if plain and len(shapes) == 1
-                else None
+        if names not in self._layouts:
+            self._layouts[names] = Layout.of(names, [d for _, d in self.pairs])
+        return self._layouts[names]
+
+
+class Layout:
+    """Some ``MjData`` fields of N envs and where their ``[N, ...]`` rows go in one block.
+
+    Args:
+        sources: uint64 ``[F, N]``: the address of field ``f`` in env ``k``.
+        shapes: each field's shape in one env.
+
+    """
+
+    def __init__(self, sources: np.ndarray, shapes: list[tuple[int, ...]]) -> None:
+        self.sources, self.shapes = sources, shapes
+        self.sizes = np.array([int(np.prod(s)) for s in shapes], np.int64)
+        self.offsets = np.cumsum(self.sizes) - self.sizes  # where each field starts
+        self.total = int(self.sizes.sum())
+
+    @classmethod
+    def of(cls, names: tuple[str, ...], datas: list[Any]) -> Layout | None:
+        """The layout of `names` in `datas`, or ``None`` where the loop cannot copy one."""
+        sources, shapes = [], []
+        for name in names:
+            arrays = [getattr(d, name) for d in datas]
+            found = {a.shape for a in arrays}
+            if len(found) != 1 or not all(
+                a.dtype == np.float64 and a.flags.c_contiguous for a in arrays
+            ):
+                return None
+            sources.append([a.ctypes.data for a in arrays])
+            shapes.append(found.pop())
+        return cls(np.array(sources, np.uint64).reshape(len(names), len(datas)), shapes)
+
+    def arguments(self) -> tuple[tuple[np.ndarray, ...], list[np.ndarray]]:
+        """A new block for one step: the loop's argument and each field's ``[N, ...]`` view."""
+        n = self.sources.shape[1]
+        block = np.empty(self.total * n)
+        views = [
+            block[o * n : (o + z) * n].reshape(n, *shape)
+            for o, z, shape in zip(
+                self.offsets.tolist(), self.sizes.tolist(), self.shapes, strict=True
             )
-        return self._fields[name]
+        ]
+        return (self.sources, block, self.offsets, self.sizes), views
 
 
 class PointerCache:

@@ -216,24 +216,13 @@ class ThreadedStepper:
         if src.shape != (len(owners), pointers.nu):
             return None
         lists = []
-        for names, out in ((before, gathered.before), (after, gathered.after)):
-            sources, outputs, sizes = [], [], []
-            for name in names:
-                found = pointers.field(name)
-                if found is None:
-                    return None
-                addresses, shape = found
-                out[name] = rows = np.empty((len(owners), *shape))
-                sources.append(addresses)
-                outputs.append(rows.ctypes.data)
-                sizes.append(rows[0].size if len(rows) else 0)
-            lists.append(
-                (
-                    np.array(sources, np.uint64).reshape(len(names), len(owners)),
-                    np.array(outputs, np.uint64),
-                    np.array(sizes, np.int64),
-                )
-            )
+        for names, out in ((tuple(before), gathered.before), (tuple(after), gathered.after)):
+            layout = pointers.layout(names)
+            if layout is None:
+                return None
+            arguments, views = layout.arguments()
+            out.update(zip(names, views, strict=True))
+            lists.append(arguments)
         return functools.partial(_run_native, loop, pointers, src, pointers.nu, lists[0], lists[1])
 
     @staticmethod
