@@ -65,10 +65,10 @@ def step_envs(
 
     """
     env = envs[0]
-    if type(env).dt is MujocoEnv.dt:  # Gymnasium's own property (one task: one env type)
-        dt = np.array([lean_dt(e) for e in envs])  # the same product, its options object kept
-    else:
-        dt = np.array([e.dt for e in envs])
+    # Gymnasium's own dt property (one task: one env type) is lean_dt's product, which keeps
+    # the options object
+    each = lean_dt if type(env).dt is MujocoEnv.dt else _DT
+    dt = np.fromiter(map(each, envs), np.float64, len(envs))
     # a `before` that reads only fields the stepping loop can read for it runs on them after
     # the step; any other reads every env first
     early = None if formula.reads_before else formula.before(Stacked(envs), env)
@@ -111,6 +111,7 @@ def batched_step(
     return {GymTask.AGENT: obs}, reward, terminated, info
 
 
+_DT = operator.attrgetter("dt")
 _KEY = operator.attrgetter("_array_key")
 _INNER = operator.attrgetter("_inner")
 

@@ -187,7 +187,7 @@ class ThreadedStepper:
         if self._pool is None or self._pid != os.getpid():  # a forked child has no threads
             self._pid = os.getpid()
             self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="advgame-physics")
-        bounds = [int(b) for b in np.linspace(0, n, parts + 1)]
+        bounds = [n * i // parts for i in range(parts + 1)]  # the threads' equal shares
         futures = [
             self._pool.submit(run, owners, ctrl, nstep, post_constraint, lo, hi, gathered)
             for lo, hi in itertools.pairwise(bounds[1:])
