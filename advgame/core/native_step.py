@@ -211,8 +211,13 @@ class PointerCache:
     data, makes a new entry.
     """
 
-    KEPT = 8
-    """Batches kept (training views and evaluations step several batches in turn)."""
+    KEPT = 4
+    """Batches kept (training views and evaluations step several batches in turn).
+
+    A dynamics disruptor that changes a body's length recompiles its copy's model and data on
+    every step it acts, so each such step makes an entry, and the kept entries hold the
+    replaced models and datas until they leave (at most this many batches of them).
+    """
 
     def __init__(self) -> None:
         self._kept: list[BatchPointers] = []  # newest first
