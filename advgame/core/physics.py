@@ -34,7 +34,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from advgame.core.native_step import BatchPointers, PointerCache, native_loop
+from advgame.core.native_step import PointerCache, native_loop
 from advgame.errors import ConfigError
 
 __all__ = ["THREADS_VAR", "Gathered", "ThreadedStepper", "default_threads", "shared_stepper"]
@@ -158,16 +158,17 @@ class ThreadedStepper:
 
         """
         n = len(owners)
-        run: Callable[..., None] = self._run
-        gathered = Gathered({}, {})
         loop = native_loop() if n and self.native else None
-        if loop is not None:
-            run = self._native(loop, owners, ctrl, before, after, gathered) or run
-        if run is self._run:
+        native = self._native(loop, owners, ctrl, nstep, post_constraint, before, after)
+        run: Callable[[int, int], None]
+        if native is None:  # the bindings' loop
             gathered = _allocate(owners, before, after)
+            run = functools.partial(self._run, owners, ctrl, nstep, post_constraint, gathered)
+        else:
+            run, gathered = native
         parts = min(self.threads, n)
         if parts < 2:
-            run(owners, ctrl, nstep, post_constraint, 0, n, gathered)
+            run(0, n)
             return gathered
         model = owners[0].model
         key = (model.nq, model.nv, model.nbody, model.ngeom, model.nu, nstep)
@@ -180,7 +181,7 @@ class ThreadedStepper:
             or cost * n < self.MIN_BATCH_SECONDS
         ):  # measure, on this thread
             start = time.perf_counter()
-            run(owners, ctrl, nstep, post_constraint, 0, n, gathered)
+            run(0, n)
             seen = (time.perf_counter() - start) / n
             self._cost[key] = seen if cost is None else min(cost, seen)
             return gathered
@@ -188,42 +189,41 @@ class ThreadedStepper:
             self._pid = os.getpid()
             self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="advgame-physics")
         bounds = [n * i // parts for i in range(parts + 1)]  # the threads' equal shares
-        futures = [
-            self._pool.submit(run, owners, ctrl, nstep, post_constraint, lo, hi, gathered)
-            for lo, hi in itertools.pairwise(bounds[1:])
-        ]
-        run(owners, ctrl, nstep, post_constraint, 0, bounds[1], gathered)  # the caller's share
+        futures = [self._pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds[1:])]
+        run(0, bounds[1])  # the caller's share
         for future in futures:
             future.result()
         return gathered
 
     def _native(
         self,
-        loop: Callable[..., None],
+        loop: Callable[..., None] | None,
         owners: Sequence[Any],
         ctrl: np.ndarray,
+        nstep: int,
+        post: bool,
         before: Sequence[str],
         after: Sequence[str],
-        gathered: Gathered,
-    ) -> Callable[..., None] | None:
-        """The compiled loop bound to this batch's addresses, with `gathered`'s rows allocated.
+    ) -> tuple[Callable[[int, int], None], Gathered] | None:
+        """The compiled `loop` bound to this batch (``run(lo, hi)``) and the rows it fills.
 
-        ``None`` where it cannot step the batch (controls of differing sizes, a field that is not
-        plain float64): the bindings' loop does then.
+        ``None`` where it cannot step the batch (no loop, controls of differing sizes, a field
+        that is not plain float64): the bindings' loop does then.
         """
+        if loop is None:
+            return None
         pointers = self._pointers.get(owners)
         src = np.ascontiguousarray(ctrl, dtype=np.float64)
-        if src.shape != (len(owners), pointers.nu):
+        first, second = pointers.layout(tuple(before)), pointers.layout(tuple(after))
+        if src.shape != (len(owners), pointers.nu) or first is None or second is None:
             return None
-        lists = []
-        for names, out in ((tuple(before), gathered.before), (tuple(after), gathered.after)):
-            layout = pointers.layout(names)
-            if layout is None:
-                return None
-            arguments, views = layout.arguments()
-            out.update(zip(names, views, strict=True))
-            lists.append(arguments)
-        return functools.partial(_run_native, loop, pointers, src, pointers.nu, lists[0], lists[1])
+        (pre, early), (late, rows) = first.arguments(), second.arguments()
+        gathered = Gathered(
+            dict(zip(before, early, strict=True)), dict(zip(after, rows, strict=True))
+        )
+        p = pointers
+        run = functools.partial(loop, p.models, p.datas, p.ctrls, src, p.nu, nstep, post)
+        return lambda lo, hi: run(lo, hi, pre, late), gathered
 
     @staticmethod
     def _run(
@@ -231,9 +231,9 @@ class ThreadedStepper:
         ctrl: np.ndarray,
         nstep: int,
         post: bool,
+        gathered: Gathered,
         lo: int,
         hi: int,
-        gathered: Gathered,
     ) -> None:
         import mujoco
 
@@ -256,26 +256,6 @@ class ThreadedStepper:
         if self._pool is not None:
             self._pool.shutdown(wait=True)
             self._pool = None
-
-
-def _run_native(
-    loop: Callable[..., None],
-    pointers: BatchPointers,
-    src: np.ndarray,
-    nu: int,
-    pre: tuple[np.ndarray, ...],
-    post_fields: tuple[np.ndarray, ...],
-    owners: Sequence[Any],
-    ctrl: np.ndarray,
-    nstep: int,
-    post: bool,
-    lo: int,
-    hi: int,
-    gathered: Gathered,
-) -> None:
-    """`ThreadedStepper._run`'s loop, fields read included, as one compiled call."""
-    p = pointers
-    loop(p.models, p.datas, p.ctrls, src, nu, nstep, post, lo, hi, pre, post_fields)
 
 
 def _allocate(owners: Sequence[Any], before: Sequence[str], after: Sequence[str]) -> Gathered:
