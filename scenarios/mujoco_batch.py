@@ -41,7 +41,7 @@ from advgame.core.physics import ThreadedStepper, shared_stepper
 from advgame.core.task import ArrayResult, GymTask, StepResult
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 from advgame.scenarios.mujoco_formulas import FORMULAS, Formula, Outcome, Stacked
-from advgame.scenarios.mujoco_lean import lean_dt, lean_step
+from advgame.scenarios.mujoco_lean import lean_step
 
 __all__ = ["TASKS", "BatchedGymTask", "BatchedMujocoEnv", "batched_step", "step_envs"]
 
@@ -65,10 +65,6 @@ def step_envs(
 
     """
     env = envs[0]
-    # Gymnasium's own dt property (one task: one env type) is lean_dt's product, which keeps
-    # the options object
-    each = lean_dt if type(env).dt is MujocoEnv.dt else _DT
-    dt = np.fromiter(map(each, envs), np.float64, len(envs))
     # a `before` that reads only fields the stepping loop can read for it runs on them after
     # the step; any other reads every env first
     early = None if formula.reads_before else formula.before(Stacked(envs), env)
@@ -81,6 +77,10 @@ def step_envs(
         after=formula.reads_after,
     )
     before = formula.before(Stacked(envs, got.before), env) if formula.reads_before else early
+    if type(env).dt is MujocoEnv.dt:  # Gymnasium's own property (one task: one env type)
+        dt = got.timestep * env.frame_skip  # its product, made for every row at once
+    else:
+        dt = np.fromiter(map(_DT, envs), np.float64, len(envs))
     return formula.after(Stacked(envs, got.after), env, before, actions, dt)
 
 

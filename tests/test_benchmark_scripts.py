@@ -38,3 +38,18 @@ def test_the_fresh_clone_timer_times_each_step_of_the_readmes_two_commands(
     assert printed[0] == "[1] venv: python3 -m venv .venv" and printed[-1].startswith("[2] tests:")
     with pytest.raises(ValueError, match="no ```bash block"):
         timer.setup_commands("# a README without commands\n")
+
+
+@pytest.mark.usefixtures("benchmarks")
+def test_the_handoff_benchmark_times_both_splits_of_one_array_game() -> None:
+    from advgame.core.native_step import native_loop
+
+    if native_loop() is None:
+        pytest.skip("bench_handoff needs the compiled loop (numba: the robosuite extra)")
+    handoff = importlib.import_module("bench_handoff")
+    ratios = handoff.measure(4, rounds=2, steps=3)
+    assert len(ratios) == 2 and all(0 < r < 100 for r in ratios)
+    import advgame.scenarios.mujoco_batch as batch
+    from advgame.core.physics import shared_stepper
+
+    assert batch.shared_stepper is shared_stepper  # the benchmark put the stepper back

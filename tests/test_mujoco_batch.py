@@ -96,6 +96,50 @@ def test_reset_mask_resets_only_the_marked_copies() -> None:
     env.close()
 
 
+def test_each_copys_own_timestep_edited_in_place_or_swapped_in_sets_its_dt() -> None:
+    """The batched step reads every copy's timestep through options kept per batch: an edit in
+    place and a swapped model (a dynamics disruptor's two ways) show, copy by copy."""
+    import mujoco
+
+    n = 3
+    batch = BatchedMujocoEnv("HalfCheetah-v5", n, threads=2)
+    singles = [gym.make("HalfCheetah-v5") for _ in range(n)]
+    try:
+        obs, _ = batch.reset(seed=[4, 5, 6])
+        for i, single in enumerate(singles):
+            assert _same(single.reset(seed=4 + i)[0], obs[i])
+        action = np.full((n, 6), 0.4, np.float32)
+        for edit in (None, "timestep", "swap"):
+            if edit == "timestep":
+                for env in (batch.envs[1], singles[1].unwrapped):
+                    env.model.opt.timestep = 0.02
+            elif edit == "swap":
+                for env in (batch.envs[2], singles[2].unwrapped):
+                    model = mujoco.MjModel.from_xml_path(env.fullpath)
+                    model.opt.timestep = 0.005
+                    data = mujoco.MjData(model)
+                    data.qpos[:], data.qvel[:] = env.data.qpos, env.data.qvel
+                    env.model, env.data = model, data
+            for _ in range(4):
+                _, reward, _, _, info = batch.step(action)
+                for i, single in enumerate(singles):
+                    _, r, _, _, i_info = single.step(action[i])
+                    assert reward[i] == r and info["x_velocity"][i] == i_info["x_velocity"]
+        assert len(set(info["x_velocity"].tolist())) == n
+    finally:
+        batch.close()
+
+
+def test_rows_taken_in_chunks_of_one_env_step_as_the_single_envs(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The threads take a split step's envs a chunk at a time (here one env a chunk, an odd
+    count of envs): which thread steps which env changes nothing."""
+    monkeypatch.setattr(ThreadedStepper, "CHUNK_SECONDS", 0.0)
+    _play_both("Hopper-v5", n=5, steps=60)
+    _play_both("Ant-v5", n=3, steps=40, threads=3)
+
+
 def test_dynamics_edits_on_one_copy_change_only_that_copy() -> None:
     env = BatchedMujocoEnv("HalfCheetah-v5", 2, threads=2)
     env.reset(seed=[0, 0])
@@ -213,11 +257,11 @@ def test_a_batch_too_cheap_to_share_stays_on_the_calling_thread(
     alone, shared = ThreadedStepper(2), ThreadedStepper(2)
     for _ in range(ThreadedStepper.PROBES + 3):
         alone.step(envs, np.full((4, 3), 0.3), nstep=4)
-    assert alone._pool is None  # measured, then judged not worth a second thread
+    assert not alone._relay.started  # measured, then judged not worth a second thread
     monkeypatch.setattr(ThreadedStepper, "MIN_BATCH_SECONDS", 0.0)
     for _ in range(ThreadedStepper.PROBES + 3):
         shared.step(twins, np.full((4, 3), 0.3), nstep=4)
-    assert shared._pool is not None  # measured PROBES times on the calling thread, then split
+    assert shared._relay.started  # measured PROBES times on the calling thread, then split
     assert all(np.array_equal(a.data.qpos, b.data.qpos) for a, b in zip(envs, twins, strict=True))
     shared.close()
 
@@ -243,7 +287,7 @@ def test_a_slow_first_step_does_not_split_a_cheap_batch_for_good(
     stepper = ThreadedStepper(2, native=False)  # the loop patched above
     for _ in range(3 * ThreadedStepper.PROBES):
         stepper.step(envs, np.zeros((4, 6)), nstep=4)
-    assert stepper._pool is None
+    assert not stepper._relay.started
     (cost,) = stepper._cost.values()
     assert cost * 4 < 0.02
     stepper.close()

@@ -145,9 +145,18 @@ class BatchPointers:
         self.models = np.array([m._address for m, _ in pairs], np.uint64)
         self.datas = np.array([d._address for _, d in pairs], np.uint64)
         self.ctrls = np.array([d.ctrl.ctypes.data for _, d in pairs], np.uint64)
+        self._options = [m.opt for m, _ in pairs]  # views of each model's own options
         sizes = {len(d.ctrl) for _, d in pairs}
         self.nu = sizes.pop() if len(sizes) == 1 else -1
         self._layouts: dict[tuple[str, ...], Layout | None] = {}
+
+    def timesteps(self) -> np.ndarray:
+        """float64 ``[N]``: each model's ``opt.timestep`` now (an edited timestep shows).
+
+        Read through options objects made once per batch: ``model.opt`` makes a new one on
+        every read, which cost more than the read itself.
+        """
+        return np.fromiter(map(_TIMESTEP, self._options), np.float64, len(self._options))
 
     def layout(self, names: tuple[str, ...]) -> Layout | None:
         """Where the loop reads `names` from in every env (made once per tuple of names).
@@ -237,3 +246,4 @@ class PointerCache:
 
 
 _MODEL_DATA = operator.attrgetter("model", "data")
+_TIMESTEP = operator.attrgetter("timestep")

@@ -1,4 +1,4 @@
-"""Batched MuJoCo stepping: N (model, data) pairs advanced by MuJoCo's C code on a thread pool.
+"""Batched MuJoCo stepping: N (model, data) pairs advanced by MuJoCo's C code on threads.
 
 `ThreadedStepper` is the simulator half of a batched task (`advgame.scenarios.mujoco_batch`):
 it sets each env's controls and calls ``mj_step(model, data, nstep)`` (plus
@@ -26,15 +26,16 @@ from __future__ import annotations
 
 import functools
 import itertools
+import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from advgame.core.native_step import PointerCache, native_loop
+from advgame.core.native_step import BatchPointers, PointerCache, native_loop
+from advgame.core.relay import Relay
 from advgame.errors import ConfigError
 
 __all__ = ["THREADS_VAR", "Gathered", "ThreadedStepper", "default_threads", "shared_stepper"]
@@ -62,11 +63,13 @@ class Gathered(NamedTuple):
     Attributes:
         before: ``{field: [N, ...]}``, row ``k`` read from env ``k`` just before its substeps.
         after: the same, read just after them (and ``mj_rnePostConstraint``).
+        timestep: float64 ``[N]``, each env's ``model.opt.timestep`` in this step.
 
     """
 
     before: dict[str, np.ndarray]
     after: dict[str, np.ndarray]
+    timestep: np.ndarray
 
 
 class ThreadedStepper:
@@ -83,8 +86,9 @@ class ThreadedStepper:
 
     Args:
         threads: simulator threads (``None``: `default_threads`), the calling thread included:
-            it steps the first share of the envs while ``threads - 1`` pool threads step the
-            rest. With 1 every env is stepped on the calling thread.
+            it and ``threads - 1`` helper threads (`advgame.core.relay.Relay`) take the envs a
+            chunk at a time (`CHUNK_SECONDS`). With 1 every env is stepped on the calling
+            thread.
         native: step each thread's share as one compiled call that holds no GIL, where it can
             be built (`advgame.core.native_step`: the same C calls, the same bits); ``False``
             keeps the bindings' Python loop.
@@ -100,12 +104,13 @@ class ThreadedStepper:
 
     """
 
-    MIN_BATCH_SECONDS = 300e-6
+    MIN_BATCH_SECONDS = 200e-6
     """A step uses more than one thread only when its envs would take at least this long on one.
 
-    Handing work to a second thread and collecting it costs about 100 µs per step on the 2-core
-    VM this was measured on (`benchmarks/bench_batch_physics.py`: two threads lose to one at
-    8 HalfCheetah copies, about 200 µs of simulation, and win at 8 Hopper copies, about 400).
+    Handing work to a second thread and collecting it cost about 100 µs per step on the 2-core
+    VM this was measured on with a thread pool, about half that with the `Relay` (7 Dec, two
+    threads against one, physics alone: 2 and 4 HalfCheetah copies, 73 and 138 µs on one
+    thread, 0.74 and 0.79 as fast; 2 Hopper copies, 197 µs, 1.11; 8 HalfCheetah, 269 µs, 1.27).
     """
 
     PROBES = 8
@@ -113,6 +118,15 @@ class ThreadedStepper:
 
     REPROBE = 512
     """A split kind is measured on the calling thread again once in this many steps."""
+
+    CHUNK_SECONDS = 100e-6
+    """The threads of a split step take its envs in chunks of about this long on one thread.
+
+    Whichever thread is free takes the next chunk, so a thread the machine slows down steps
+    fewer envs instead of keeping the others waiting for its fixed share; the caller then polls
+    a helper still at work for about one chunk before it sleeps (`Relay.run`'s ``spin``).
+    Which thread steps which env changes no result: each env has its own `MjData`.
+    """
 
     def __init__(self, threads: int | None = None, native: bool = True) -> None:
         if threads is None:
@@ -123,8 +137,7 @@ class ThreadedStepper:
         """The most threads a step uses (a step of fewer envs, or of cheap ones, uses fewer)."""
         self.native = native
         """Whether steps use the compiled loop where it can be built."""
-        self._pool: ThreadPoolExecutor | None = None
-        self._pid = os.getpid()
+        self._relay = Relay(threads - 1)
         self._cost: dict[tuple[int, ...], float] = {}  # cheapest seconds per env step, one thread
         self._calls: dict[tuple[int, ...], int] = {}  # steps of each kind so far
         self._pointers = PointerCache()
@@ -154,18 +167,23 @@ class ThreadedStepper:
         Returns:
             the fields read, ``[N, ...]`` each, row ``k`` from ``owners[k]`` (`Gathered`): read
             in the stepping loop, env by env, so that on the compiled loop reading them costs
-            no Python per env.
+            no Python per env; and each env's timestep.
 
         """
         n = len(owners)
-        loop = native_loop() if n and self.native else None
-        native = self._native(loop, owners, ctrl, nstep, post_constraint, before, after)
+        if not n:
+            return Gathered({}, {}, np.zeros(0))
+        pointers = self._pointers.get(owners)
+        timestep = pointers.timesteps()
+        loop = native_loop() if self.native else None
+        native = self._native(loop, pointers, ctrl, nstep, post_constraint, before, after)
         run: Callable[[int, int], None]
         if native is None:  # the bindings' loop
-            gathered = _allocate(owners, before, after)
+            gathered = _allocate(owners, before, after, timestep)
             run = functools.partial(self._run, owners, ctrl, nstep, post_constraint, gathered)
         else:
-            run, gathered = native
+            run, rows = native
+            gathered = Gathered(*rows, timestep)
         parts = min(self.threads, n)
         if parts < 2:
             run(0, n)
@@ -185,26 +203,33 @@ class ThreadedStepper:
             seen = (time.perf_counter() - start) / n
             self._cost[key] = seen if cost is None else min(cost, seen)
             return gathered
-        if self._pool is None or self._pid != os.getpid():  # a forked child has no threads
-            self._pid = os.getpid()
-            self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="advgame-physics")
-        bounds = [n * i // parts for i in range(parts + 1)]  # the threads' equal shares
-        futures = [self._pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds[1:])]
-        run(0, bounds[1])  # the caller's share
-        for future in futures:
-            future.result()
+        # rows in chunks of about CHUNK_SECONDS, taken in turn by whichever thread is free
+        # (next() of one shared counter is atomic under the GIL): a thread the machine slows
+        # takes fewer chunks instead of making the others wait for its fixed share
+        size = max(1, min(math.ceil(self.CHUNK_SECONDS / cost), -(-n // parts)))
+        starts = itertools.count(0, size)
+
+        def share() -> None:
+            for lo in starts:
+                if lo >= n:
+                    return
+                run(lo, min(lo + size, n))
+
+        # the caller polls a helper still at work for about one chunk before sleeping
+        if not self._relay.run([share] * (parts - 1), share, spin=size * cost):
+            run(0, n)  # another thread is stepping a batch on the helpers: this one alone
         return gathered
 
     def _native(
         self,
         loop: Callable[..., None] | None,
-        owners: Sequence[Any],
+        pointers: BatchPointers,
         ctrl: np.ndarray,
         nstep: int,
         post: bool,
         before: Sequence[str],
         after: Sequence[str],
-    ) -> tuple[Callable[[int, int], None], Gathered] | None:
+    ) -> tuple[Callable[[int, int], None], tuple[dict, dict]] | None:
         """The compiled `loop` bound to this batch (``run(lo, hi)``) and the rows it fills.
 
         ``None`` where it cannot step the batch (no loop, controls of differing sizes, a field
@@ -212,18 +237,15 @@ class ThreadedStepper:
         """
         if loop is None:
             return None
-        pointers = self._pointers.get(owners)
         src = np.ascontiguousarray(ctrl, dtype=np.float64)
         first, second = pointers.layout(tuple(before)), pointers.layout(tuple(after))
-        if src.shape != (len(owners), pointers.nu) or first is None or second is None:
+        if src.shape != (len(pointers.pairs), pointers.nu) or first is None or second is None:
             return None
         (pre, early), (late, rows) = first.arguments(), second.arguments()
-        gathered = Gathered(
-            dict(zip(before, early, strict=True)), dict(zip(after, rows, strict=True))
-        )
+        fields = dict(zip(before, early, strict=True)), dict(zip(after, rows, strict=True))
         p = pointers
         run = functools.partial(loop, p.models, p.datas, p.ctrls, src, p.nu, nstep, post)
-        return lambda lo, hi: run(lo, hi, pre, late), gathered
+        return lambda lo, hi: run(lo, hi, pre, late), fields
 
     @staticmethod
     def _run(
@@ -253,12 +275,12 @@ class ThreadedStepper:
 
     def close(self) -> None:
         """Stop the threads (idempotent; a later step starts them again)."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
-            self._pool = None
+        self._relay.close()
 
 
-def _allocate(owners: Sequence[Any], before: Sequence[str], after: Sequence[str]) -> Gathered:
+def _allocate(
+    owners: Sequence[Any], before: Sequence[str], after: Sequence[str], timestep: np.ndarray
+) -> Gathered:
     """Empty ``[N, ...]`` rows for the fields the bindings' loop reads, shaped as env 0's."""
 
     def rows(names: Sequence[str]) -> dict[str, np.ndarray]:
@@ -268,7 +290,7 @@ def _allocate(owners: Sequence[Any], before: Sequence[str], after: Sequence[str]
             out[name] = np.empty((len(owners), *field.shape), field.dtype)
         return out
 
-    return Gathered(rows(before), rows(after)) if owners else Gathered({}, {})
+    return Gathered(rows(before), rows(after), timestep)
 
 
 _SHARED: dict[int, ThreadedStepper] = {}
