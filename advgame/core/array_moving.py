@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from gymnasium import spaces
 
+from advgame.core.checks import all_set, any_set
 from advgame.core.disruptor import Disruptor
 from advgame.core.moves import protagonist_rows
 from advgame.core.schedule import Schedule
@@ -105,7 +106,7 @@ class ArrayMoves:
         self._require(mask)
         for d in self._sensing:
             on = self._active[d.agent] if mask is None else self._active[d.agent] & mask
-            if on.any():
+            if any_set(on):
                 self.last_clipped[d.agent] = self._decode(d, actions, on)
                 self._apply_obs(d, self._shown, self._last[d.agent], on)
             else:
@@ -123,7 +124,7 @@ class ArrayMoves:
         acted: dict[str, np.ndarray] = {}
         for d in self._act_ds:
             rows = acted[d.agent] = self._active[d.agent].copy()
-            clipped[d.agent] = self._decode(d, actions, rows) if rows.any() else rows * 0
+            clipped[d.agent] = self._decode(d, actions, rows) if any_set(rows) else rows * 0
         acts = {}
         for p, (space, shape) in self._p_spaces.items():
             checked = protagonist_rows(p, space, shape, self._take(actions, p))
@@ -132,9 +133,9 @@ class ArrayMoves:
             self._disrupt_environment(acted)
         for d in self._action_ds:
             rows = self._effective(d)
-            if rows.all():
+            if all_set(rows):
                 d.action_array(acts, self._last[d.agent], self._rngs)
-            elif rows.any():
+            elif any_set(rows):
                 sub = {p: v[rows] for p, v in acts.items()}
                 d.action_array(sub, self._last[d.agent][rows], self._rows(rows))
                 for p in acts:  # a copy: `acts[p]` may be the caller's own array
@@ -149,9 +150,9 @@ class ArrayMoves:
         costs = {p: r.cost.copy() for p in self.protagonists}
         for d in self._reward_ds:
             rows = self._effective(d)
-            if rows.all():
+            if all_set(rows):
                 d.reward_array(rewards, costs, self._last[d.agent])
-            elif rows.any():
+            elif any_set(rows):
                 sub_r = {p: v[rows] for p, v in rewards.items()}
                 sub_c = {p: v[rows] for p, v in costs.items()}
                 d.reward_array(sub_r, sub_c, self._last[d.agent][rows])
@@ -210,7 +211,7 @@ class ArrayMoves:
     # -- helpers --------------------------------------------------------------------------------
     def _require(self, mask: np.ndarray | None = None) -> None:
         done = self.done if mask is None else self.done & mask
-        if done.any():
+        if any_set(done):
             rows = np.flatnonzero(done).tolist()
             raise ActionError(
                 f"Copies {rows} have no live episode; call reset(rows=game.done) before moving."
@@ -225,7 +226,7 @@ class ArrayMoves:
 
     def _decode(self, d: Any, actions: Mapping[str, Any], rows: np.ndarray) -> np.ndarray:
         """Decode `d`'s actions on `rows` into its last perturbation; the clip counts ``[N]``."""
-        a, every = self._take(actions, d.agent), bool(rows.all())
+        a, every = self._take(actions, d.agent), all_set(rows)
         if not every:
             a = np.asarray(a)
             a = a[rows] if a.ndim and len(a) == self.n else a
@@ -244,9 +245,9 @@ class ArrayMoves:
     def _apply_obs(
         self, d: Any, shown: dict[str, np.ndarray], u: np.ndarray, rows: np.ndarray
     ) -> None:
-        if rows.all():
+        if all_set(rows):
             d.observation_array(shown, u)
-        elif rows.any():
+        elif any_set(rows):
             sub = {p: v[rows] for p, v in shown.items()}
             d.observation_array(sub, u[rows])
             for p, v in sub.items():

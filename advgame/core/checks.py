@@ -14,13 +14,15 @@ import math
 
 import numpy as np
 
-__all__ = ["SMALL", "all_finite", "clip_ufunc", "in_unit_box"]
+__all__ = ["SMALL", "all_finite", "all_set", "any_set", "clip_ufunc", "in_unit_box"]
 
 # `clip_ufunc`: the ufunc behind `np.clip` and `ndarray.clip` (same loops, same results) without
 # their Python wrapper, which costs more than the clip of one action.
 try:  # numpy >= 1.26 (numpy 2 warns on `numpy.core`)
+    from numpy._core.multiarray import count_nonzero as _count  # type: ignore[import-not-found,attr-defined,unused-ignore]
     from numpy._core.umath import clip as clip_ufunc  # type: ignore[import-not-found,attr-defined,unused-ignore]
 except ImportError:  # pragma: no cover - older numpy
+    from numpy.core.multiarray import count_nonzero as _count  # type: ignore[attr-defined,no-redef,unused-ignore]
     from numpy.core.umath import clip as clip_ufunc  # type: ignore[attr-defined,no-redef,unused-ignore]
 
 SMALL = 64
@@ -49,3 +51,17 @@ def in_unit_box(u: np.ndarray) -> bool:
         flat = u.tolist()
         return min(flat) >= -1.0 and max(flat) <= 1.0 and math.isfinite(sum(flat))
     return bool(np.maximum.reduce(np.abs(u), axis=None, initial=0.0) <= 1.0)  # NaN: False
+
+
+def any_set(mask: np.ndarray) -> bool:
+    """``mask.any()`` of a bool array: numpy's C count of its set entries, no Python wrapper.
+
+    The array game tests its row masks several times a step; ``ndarray.any`` goes through a
+    Python wrapper and a reduction (0.9 µs on 8 entries here), the count 0.04 µs.
+    """
+    return bool(_count(mask))  # an int, or numpy's int64 on numpy 2
+
+
+def all_set(mask: np.ndarray) -> bool:
+    """``mask.all()`` of a bool array (True for an empty one), as `any_set` counts."""
+    return bool(_count(mask) == mask.size)

@@ -261,7 +261,7 @@ class ActionRuntime(AdditiveDisruptor):
         else:
             adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
             new = (1.0 - self.alpha) * a.astype(np.float64) + self.alpha * adv
-        return new.clip(*bounds).astype(space.dtype)
+        return clip_ufunc(new, *bounds).astype(space.dtype)  # `ndarray.clip`'s own ufunc
 
 
 def _size(space: spaces.Box | spaces.Discrete) -> int:
