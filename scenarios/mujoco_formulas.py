@@ -70,10 +70,20 @@ def _times(weight: float, values: np.ndarray) -> np.ndarray:
 
     A single env multiplies a NumPy scalar (``np.float32`` for float32 actions) by a Python
     number, and NumPy may promote that scalar product differently from the array product.
+    The product's type depends on the two types only (NumPy 1 promotes a scalar times a Python
+    number by their types; NumPy 2's Python numbers are weak), so it is found once per pair.
     """
     if len(values):
-        values = values.astype((weight * values[0]).dtype, copy=False)
+        key = (type(weight), values.dtype)
+        dtype = _PRODUCT.get(key)
+        if dtype is None:
+            dtype = _PRODUCT[key] = (weight * values[0]).dtype
+        values = values.astype(dtype, copy=False)
     return weight * values
+
+
+_PRODUCT: dict[tuple[type, np.dtype], np.dtype] = {}
+"""(type of the weight, dtype of the values) -> the dtype of their scalar product."""
 
 
 def _ctrl_cost(weight: float, actions: np.ndarray) -> np.ndarray:

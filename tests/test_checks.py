@@ -21,7 +21,10 @@ def _box(u: np.ndarray) -> bool:
 @given(arrays(np.float64, st.integers(1, SMALL + 3), elements=VALUES))
 def test_in_unit_box_is_the_numpy_test(u: np.ndarray) -> None:
     assert in_unit_box(u) == _box(u)
-    assert in_unit_box(u.reshape(1, -1)) == _box(u)  # a batch: the numpy reduction
+    assert in_unit_box(u.reshape(1, -1)) == _box(u)  # rows of a batch: in Python up to SMALL
+    assert in_unit_box(np.stack([u, u]).T) == _box(u)  # a strided batch
+    big = np.tile(u, (SMALL // u.size + 2, 1))  # more than SMALL entries: the numpy reduction
+    assert big.size > SMALL and in_unit_box(big) == _box(u)
 
 
 @given(arrays(np.float64, st.integers(1, SMALL + 3), elements=VALUES))

@@ -231,15 +231,17 @@ class ArrayMoves:
             a = np.asarray(a)
             a = a[rows] if a.ndim and len(a) == self.n else a
         u, counts = d.decode_array(a, self.n if every else int(rows.sum()))
-        last, out = self._last[d.agent], np.zeros(self.n, np.int64)
+        last = self._last[d.agent]
         if every:
             last[...] = u
             out = counts
         else:
             last[rows] = u
+            out = np.zeros(self.n, np.int64)
             out[rows] = counts
         self._has_last[d.agent] |= rows
-        self.clip_count[d.agent] += out
+        if any_set(out):  # nothing clipped (the common case): the counts stay as they are
+            self.clip_count[d.agent] += out
         return out
 
     def _apply_obs(

@@ -43,18 +43,18 @@ def all_finite(a: np.ndarray) -> bool:
 def in_unit_box(u: np.ndarray) -> bool:
     """Whether every entry of the float array `u` (any shape) lies in ``[-1, 1]`` (NaN does not).
 
-    One action (up to `SMALL` entries) is tested in Python: a numpy reduction costs about as
-    much as the simulator's own Python per step. `min` and `max` skip a NaN that is not first,
-    so the sum (NaN if any entry is) settles it.
+    Up to `SMALL` entries (one action, or a few copies' rows of one) are tested in Python: a
+    numpy reduction costs about as much as the simulator's own Python per step. `min` and
+    `max` skip a NaN that is not first, so the sum (NaN if any entry is) settles it.
     """
-    if u.ndim == 1 and 0 < u.size <= SMALL:
-        flat = u.tolist()
+    if 0 < u.size <= SMALL:
+        flat = (u if u.ndim == 1 else u.reshape(-1)).tolist()
         return min(flat) >= -1.0 and max(flat) <= 1.0 and math.isfinite(sum(flat))
     return bool(np.maximum.reduce(np.abs(u), axis=None, initial=0.0) <= 1.0)  # NaN: False
 
 
 def any_set(mask: np.ndarray) -> bool:
-    """``mask.any()`` of a bool array: numpy's C count of its set entries, no Python wrapper.
+    """``mask.any()`` of a bool (or integer) array: numpy's C count of its nonzero entries.
 
     The array game tests its row masks several times a step; ``ndarray.any`` goes through a
     Python wrapper and a reduction (0.9 µs on 8 entries here), the count 0.04 µs.
