@@ -97,3 +97,41 @@ def test_a_forked_child_makes_its_own_helpers() -> None:
     finally:
         relay.close()
     assert out == [1]
+
+
+def test_an_interrupt_while_waiting_is_raised_only_once_the_helper_has_ended(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Ctrl-C during a step must not leave a helper stepping the simulations behind the caller's
+    back: the wait goes on, and the interrupt comes after."""
+    relay = Relay(1)
+    ended: list[float] = []
+    release = threading.Event()
+
+    def slow() -> None:
+        release.wait(5)
+        ended.append(time.perf_counter())
+
+    polls = [0]
+    real_yield = os.sched_yield
+
+    def interrupting_yield() -> None:
+        polls[0] += 1
+        if polls[0] == 3:
+            threading.Timer(0.05, release.set).start()
+            raise KeyboardInterrupt
+        real_yield()
+
+    monkeypatch.setattr(os, "sched_yield", interrupting_yield)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            relay.run([slow], lambda: None, spin=10.0)
+        raised = time.perf_counter()
+        assert ended and ended[0] <= raised  # the helper's job ended before the interrupt
+        monkeypatch.setattr(os, "sched_yield", real_yield)
+        out: list[int] = []
+        assert relay.run([lambda: out.append(1)], lambda: None)  # still in step afterwards
+        assert out == [1]
+    finally:
+        release.set()
+        relay.close()

@@ -52,19 +52,29 @@ class _Helper:
         self._job = job
         self._go.release()
 
-    def wait(self, spin: float) -> None:
-        if not self._done.acquire(blocking=False):
-            end = time.perf_counter() + spin
-            while True:  # poll, giving the core away between polls, then sleep on the lock
-                os.sched_yield()
+    def wait(self, spin: float) -> BaseException | None:
+        """Wait for the job to end (polling for `spin` seconds first); return its error.
+
+        An interrupt (KeyboardInterrupt, a signal handler's error) while waiting does not stop
+        the wait: the helper may still be stepping the caller's simulations, so it is raised
+        once the job has ended.
+        """
+        interrupt: BaseException | None = None
+        end = time.perf_counter() + spin
+        while True:
+            try:
                 if self._done.acquire(blocking=False):
                     break
                 if time.perf_counter() > end:
                     self._done.acquire()
                     break
-        error, self._error = self._error, None
-        if error is not None:
-            raise error
+                os.sched_yield()  # poll, giving the core away between polls, then sleep
+            except BaseException as caught:
+                interrupt = interrupt or caught
+        failed, self._error = self._error, None
+        if interrupt is not None:
+            raise interrupt
+        return failed
 
     def stop(self) -> None:
         self._job = None
@@ -133,15 +143,18 @@ class Relay:
                 helper.start(job)
             try:
                 own()
-            finally:
-                errors = []
+            finally:  # every helper is collected, whatever `own` raised
+                errors, interrupt = [], None
                 for helper in helpers:
                     try:
-                        helper.wait(spin)
-                    except BaseException as error:  # every helper is collected first
-                        errors.append(error)
-            if errors:
-                raise errors[0]
+                        errors.append(helper.wait(spin))
+                    except BaseException as caught:  # an interrupt: raised once all are in
+                        interrupt = interrupt or caught
+                if interrupt is not None:
+                    raise interrupt
+            for failed in errors:
+                if failed is not None:
+                    raise failed
             return True
         finally:
             self._busy.release()
