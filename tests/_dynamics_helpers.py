@@ -60,3 +60,15 @@ def play_gym(env_id: str, seed: int, actions: list[np.ndarray]) -> list[np.ndarr
         return out
     finally:
         env.close()
+
+
+def install_recompiled_model(env, timestep: float) -> None:
+    """Give a Gymnasium MuJoCo `env` a model recompiled from its XML, with another `timestep`,
+    and data carrying its state over: what a dynamics disruptor that recompiles installs."""
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_path(env.fullpath)
+    model.opt.timestep = timestep
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = env.data.qpos, env.data.qvel
+    env.model, env.data = model, data

@@ -12,6 +12,7 @@ import pytest
 from advgame.core.physics import THREADS_VAR, ThreadedStepper, default_threads, shared_stepper
 from advgame.errors import ConfigError, UnknownNameError
 from advgame.scenarios.mujoco_batch import TASKS, BatchedMujocoEnv
+from tests._dynamics_helpers import install_recompiled_model
 
 
 @pytest.fixture(autouse=True)
@@ -99,8 +100,6 @@ def test_reset_mask_resets_only_the_marked_copies() -> None:
 def test_each_copys_own_timestep_edited_in_place_or_swapped_in_sets_its_dt() -> None:
     """The batched step reads every copy's timestep through options kept per batch: an edit in
     place and a swapped model (a dynamics disruptor's two ways) show, copy by copy."""
-    import mujoco
-
     n = 3
     batch = BatchedMujocoEnv("HalfCheetah-v5", n, threads=2)
     singles = [gym.make("HalfCheetah-v5") for _ in range(n)]
@@ -115,11 +114,7 @@ def test_each_copys_own_timestep_edited_in_place_or_swapped_in_sets_its_dt() -> 
                     env.model.opt.timestep = 0.02
             elif edit == "swap":
                 for env in (batch.envs[2], singles[2].unwrapped):
-                    model = mujoco.MjModel.from_xml_path(env.fullpath)
-                    model.opt.timestep = 0.005
-                    data = mujoco.MjData(model)
-                    data.qpos[:], data.qvel[:] = env.data.qpos, env.data.qvel
-                    env.model, env.data = model, data
+                    install_recompiled_model(env, timestep=0.005)
             for _ in range(4):
                 _, reward, _, _, info = batch.step(action)
                 for i, single in enumerate(singles):

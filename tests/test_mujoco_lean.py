@@ -11,12 +11,12 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium as gym
-import mujoco
 import numpy as np
 import pytest
 
 import advgame
 from advgame.scenarios.mujoco_lean import LEAN, lean_step
+from tests._dynamics_helpers import install_recompiled_model
 
 CASES = [
     ("HalfCheetah-v5", {}),
@@ -119,11 +119,7 @@ def test_the_lean_step_follows_an_edited_timestep_and_a_swapped_model() -> None:
                 env.model.opt.timestep = 0.02
         elif edit == "swap":  # a recompiled model, as a dynamics disruptor installs one
             for env in (plain, twin):
-                model = mujoco.MjModel.from_xml_path(env.fullpath)
-                model.opt.timestep = 0.005
-                data = mujoco.MjData(model)
-                data.qpos[:], data.qvel[:] = env.data.qpos, env.data.qvel
-                env.model, env.data = model, data
+                install_recompiled_model(env, timestep=0.005)
         for _ in range(5):
             expected, got = plain.step(action), lean(action)
             assert _same(expected[4], got[4]) and _same(expected[1], got[1])  # x_velocity: dt
