@@ -199,3 +199,55 @@ def test_vector_view_swaps_policies_mid_episode() -> None:
             assert ia.keys() == ib.keys()
             for key in ia:
                 np.testing.assert_array_equal(ia[key], ib[key], err_msg=key)
+
+
+def test_vector_view_with_adversaries_acting_on_some_copies_only() -> None:
+    """The array path asks each embedded policy for the copies where it moves (some of them,
+    under probabilistic and periodic schedules) and plays what DummyVecEnv's views play."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from advgame.core.vector import VectorView
+    from advgame.core.views import view_factory
+
+    policies = {d.agent: _EchoSpec() for d in split_schedules()}
+    fns = [
+        view_factory(
+            "Hopper-v5", "protagonist", policies, disruptors=split_schedules(), max_episode_steps=25
+        )
+    ] * N
+    array, dummy = VectorView(fns), DummyVecEnv(fns)
+    assert array._array is not None  # the array path, not lockstep
+    array.seed(5)
+    dummy.seed(5)
+    np.testing.assert_array_equal(array.reset(), dummy.reset())
+    rng = np.random.default_rng(1)
+    for _ in range(60):  # episodes of 25 steps: resets too
+        actions = rng.uniform(-1, 1, (N, 3)).astype(np.float32)
+        a, b = array.step(actions), dummy.step(actions)
+        for x, y in zip(a[:3], b[:3], strict=True):
+            np.testing.assert_array_equal(x, y)
+        for ia, ib in zip(a[3], b[3], strict=True):
+            assert ia.keys() == ib.keys()
+            for key in ia:
+                np.testing.assert_array_equal(ia[key], ib[key], err_msg=key)
+
+
+class _Echo:
+    """An adversary whose action is a function of what it observes: which rows it is asked
+    for, and with which observations, shows in every move."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+
+    def reset(self, seed: int | None = None) -> None:
+        pass
+
+    def act(self, observation: Any) -> np.ndarray:
+        return np.tanh(3.0 * np.resize(np.asarray(observation, np.float64), self.size)) * 1.2
+
+
+class _EchoSpec:
+    """Builds an `_Echo` of the agent's action size (picklable, as view factories need)."""
+
+    def build(self, info: Any) -> _Echo:
+        return _Echo(int(np.prod(info.action_space.shape)))

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from advgame.core.array_game import ArrayGame, ArrayStep, unsupported
+from advgame.core.checks import all_set, any_set
 from advgame.core.policy import act_batch
 from advgame.core.views import SingleAgentView
 
@@ -92,7 +93,7 @@ class ArrayPath:
             step = game.act({**self._ask(self._acting), agent: actions})
             if agent in step.clipped:
                 clipped = step.clipped[agent]
-        if not self._senses and (game.sensing() & ~game.done).any():
+        if not self._senses and any_set(game.sensing() & ~game.done):
             self._sense({})  # the next step's sense move, of the embedded adversaries
         return self._results(step, clipped)
 
@@ -111,9 +112,13 @@ class ArrayPath:
             rows = game.active(a) if a in game.disruptors else np.ones(game.n, np.bool_)
             if live is not None:
                 rows &= live
-            if not rows.any():
+            if not any_set(rows):
                 continue
             obs = game.observe(a)
+            if all_set(rows):  # every copy moves (the common case): no index arrays
+                policies = [v.policies[a] for v in self.views]
+                out[a] = act_batch(policies, list(obs), self.exact)  # rows as obs[i] gives them
+                continue
             idx = np.flatnonzero(rows)
             answers = act_batch(
                 [self.views[i].policies[a] for i in idx], [obs[i] for i in idx], self.exact
