@@ -79,7 +79,11 @@ def test_a_second_caller_while_the_relay_is_busy_is_told_so() -> None:
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="fork only")
+@pytest.mark.filterwarnings("ignore:This process .* is multi-threaded:DeprecationWarning")
 def test_a_forked_child_makes_its_own_helpers() -> None:
+    """A process forked after the helpers started (a pool worker forked from a process that
+    stepped a batch) has none of them: its relay makes its own (Python 3.12+ warns of the fork
+    of a threaded process; that fork is the point here)."""
     relay = Relay(1)
     out: list[int] = []
     try:
