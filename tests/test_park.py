@@ -156,3 +156,74 @@ def test_parking_with_nothing_in_training_says_so(
     spec.write_text(TINY)
     assert main(["campaign", str(spec), "--park"]) == 0
     assert "parked 0 run(s)" in capsys.readouterr().out
+
+
+def test_park_every_parks_on_each_tick_survives_a_failed_park_and_parks_on_interrupt() -> None:
+    import threading
+
+    from advgame.errors import ConfigError
+    from advgame.workflows.park import ParkEvery
+
+    calls: list[str] = []
+    ticked = threading.Event()
+
+    def park() -> dict[str, int]:
+        calls.append("park")
+        if len(calls) == 2:
+            raise FileNotFoundError("a checkpoint deleted mid-park")  # logged, not raised
+        if len(calls) >= 3:
+            ticked.set()
+        return {"sac-s0": len(calls)}
+
+    with ParkEvery(park, 0.02) as parker:
+        assert ticked.wait(30)  # the third tick came after the second one failed
+    after = len(calls)
+    assert parker.parks == after - 1  # every call but the failed one completed
+    assert len(calls) == after  # leaving normally stops the ticks and parks nothing more
+
+    with pytest.raises(KeyboardInterrupt), ParkEvery(park, 3600) as parker:
+        raise KeyboardInterrupt
+    assert len(calls) == after + 1 and parker.parks == 1  # one park on the way out
+    with pytest.raises(ConfigError, match="> 0 seconds"):
+        ParkEvery(park, 0)
+
+
+def test_a_train_stage_with_park_every_leaves_a_parked_copy_when_it_is_killed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A session cut off mid-run (no ``--park``) still finds its run parked in ADVGAME_PARK."""
+    import time
+
+    import advgame.workflows.campaign as campaign_module
+    from advgame.training import train
+    from advgame.workflows.park import parked_iteration
+
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(TINY)
+    outside = tmp_path / "outside"
+    monkeypatch.setenv("ADVGAME_PARK", str(outside))
+    parked = outside / "tiny" / "sac-s0"
+
+    def cut_off(unit: tuple) -> str:
+        config, partial, _, _ = unit
+        train(dataclasses.replace(config, iterations=2), Path(partial), progress=False)
+        deadline = time.monotonic() + 60
+        while parked_iteration(parked) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)  # training goes on here; the parker's tick comes meanwhile
+        assert parked_iteration(parked) == 2, "no periodic park while the run trained"
+        raise KeyboardInterrupt  # the session ends
+
+    monkeypatch.setattr(campaign_module, "_train_unit", cut_off)
+    args = ["campaign", str(spec), "--stage", "train", "--workers", "1", "--no-progress"]
+    assert main([*args, "--park-every", "-1"]) == 2
+    assert "--park-every must be >= 0 minutes" in capsys.readouterr().err
+    assert main([*args, "--park-every", "0.002"]) == 130  # every 0.12 s
+    assert parked_iteration(parked) == 2
+    assert not (tmp_path / "tiny" / "parked").exists()  # ADVGAME_PARK's folder, not the tree's
+    assert json.loads((parked / "config.json").read_text())["iterations"] == 2
+
+    from advgame.cli.campaign import _park_minutes
+
+    assert _park_minutes(None) == 30.0  # ADVGAME_PARK set: every half hour unless told
+    monkeypatch.delenv("ADVGAME_PARK")
+    assert (_park_minutes(None), _park_minutes(5.0)) == (0.0, 5.0)

@@ -35,6 +35,10 @@ def campaign_parser(sub: Any, executor_arguments: Callable[..., None]) -> None:
                    help="park every run in training at its last checkpoint in parked/ (kept "
                    "beside runs/, not in git: copy it to resume elsewhere), or in "
                    "$ADVGAME_PARK/CAMPAIGN when that is set, and stop")  # fmt: skip
+    p.add_argument("--park-every", type=float, metavar="MINUTES",
+                   help="while training, park the runs trained here every MINUTES (as --park "
+                   "does), so a process killed without --park loses at most that much; default "
+                   "30 when $ADVGAME_PARK is set, else never (0: never)")  # fmt: skip
     p.add_argument("--release", metavar="ZOO", nargs="?", const="", default=None,
                    help="after the table, copy each method's median agent into the zoo "
                    "(default: the repository's zoo/) with its manifest entry")  # fmt: skip
@@ -116,6 +120,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         campaign, out, workers=args.workers, executor=args.executor, address=args.address,
         stage=args.stage, max_runs=args.max_runs, progress=not args.no_progress,
         only=[r.strip() for r in args.runs.split(",") if r.strip()] if args.runs else None,
+        park_every=60 * _park_minutes(args.park_every),
     )  # fmt: skip
     print(f"campaign: {path}")
     if args.release is not None and args.stage != "train":
@@ -161,3 +166,16 @@ def _cmd_zoo(args: argparse.Namespace) -> int:
               f"{e.natural_return:>8.1f} {e.worst_attack_return:>8.1f}  "
               f"{e.worst_attack}" + (f" ({e.threat})" if e.threat else ""))  # fmt: skip
     return 0
+
+
+def _park_minutes(given: float | None) -> float:
+    """``--park-every``: as given, else 30 minutes where `PARK_ENV` names a folder, else 0."""
+    import os
+
+    from advgame.workflows.park import PARK_ENV
+
+    if given is None:
+        return 30.0 if os.environ.get(PARK_ENV, "").strip() else 0.0
+    if not given >= 0:
+        raise ConfigError(f"--park-every must be >= 0 minutes, got {given}.")
+    return given

@@ -179,6 +179,7 @@ def run_campaign(
     max_runs: int | None = None,
     progress: bool = True,
     only: Sequence[str] | None = None,
+    park_every: float = 0.0,
 ) -> Path:
     """Train what is not finished, evaluate, write the table; return ``campaign.md``.
 
@@ -195,12 +196,17 @@ def run_campaign(
             bar (lines when stderr is a file) for the evaluation.
         only: train only these runs (``METHOD-sSEED``), in this order: how a session picks the
             pieces that fit its time.
+        park_every: while training, park the runs trained here every this many seconds
+            (`advgame.workflows.park.ParkEvery`; 0: never), so that a process killed without
+            ``--park`` loses at most that much of each.
 
     """
     from advgame.runner.run import run_units
 
     if stage not in ("train", "evaluate", "all"):
         raise ConfigError(f"stage must be 'train', 'evaluate' or 'all', got {stage!r}.")
+    if not park_every >= 0:
+        raise ConfigError(f"park_every must be >= 0 seconds, got {park_every}.")
     out = Path(out)
     (out / "runs").mkdir(parents=True, exist_ok=True)
     if stage in ("train", "all"):
@@ -226,9 +232,10 @@ def run_campaign(
                     (campaign.config(r), str(out / "runs" / r), str(out / FINISHED / r), show)
                     for r in todo
                 ]
-                run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
-                          address=address, max_retries=1,
-                          progress=_StatusEach(campaign, out, todo, progress))  # fmt: skip
+                with _parking(campaign, out, todo, park_every):
+                    run_units(_train_unit, units, executor=executor, workers=min(workers, len(units)),
+                              address=address, max_retries=1,
+                              progress=_StatusEach(campaign, out, todo, progress))  # fmt: skip
                 _unpark(out, todo)  # the runs that finished drop their parked copies
     status = write_status(campaign, out)
     evaluation_curves(campaign, out)  # the in-training evaluation's figure, if runs have one
@@ -241,6 +248,17 @@ def run_campaign(
     path = campaign_table(campaign, out, out / FINISHED)
     write_status(campaign, out)
     return path
+
+
+def _parking(campaign: Campaign, out: Path, runs: Sequence[str], seconds: float) -> Any:
+    """`ParkEvery` over `runs` every `seconds` (0: a context that does nothing)."""
+    import contextlib
+
+    from advgame.workflows.park import ParkEvery
+
+    if not seconds:
+        return contextlib.nullcontext()
+    return ParkEvery(lambda: park_campaign(campaign, out, only=runs), seconds)
 
 
 def _left_to_others(out: Path, held: Sequence[str]) -> None:
@@ -275,19 +293,22 @@ def _unpark(out: Path, names: Sequence[str]) -> None:
             unpark_run(parked, out / "runs" / r)
 
 
-def park_campaign(campaign: Campaign, out: str | Path) -> dict[str, int]:
+def park_campaign(
+    campaign: Campaign, out: str | Path, only: Sequence[str] | None = None
+) -> dict[str, int]:
     """Park every run of the campaign in training (``runs/``, not finished) in ``parked/``.
 
     Returns the iteration each was parked at. Safe while they train: each is parked at its
     last checkpoint. ``parked/`` stays in the work tree (git ignores it), or with
     ``ADVGAME_PARK`` set the copies go to that folder outside it (`advgame.workflows.park.
-    park_root`); the train stage run later resumes each run from its copy.
+    park_root`); the train stage run later resumes each run from its copy. `only`: park just
+    these runs (the ones a train stage trains, when it parks them as it goes).
     """
     from advgame.workflows.park import park_root, park_run
 
     out = Path(out)
     parked = {}
-    for r in campaign.runs():
+    for r in campaign.runs() if only is None else only:
         run = out / "runs" / r
         if not (out / FINISHED / r).exists() and (run / "state.json").is_file():
             parked[r] = park_run(run, park_root(out) / r)

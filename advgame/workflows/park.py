@@ -31,8 +31,12 @@ events are not kept (the curves are in ``progress.csv``).
 from __future__ import annotations
 
 import json
+import logging
 import shutil
+import threading
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from types import TracebackType
 from typing import Any
 
 from advgame.core.config import load_json, read_json, write_atomic
@@ -41,6 +45,7 @@ from advgame.errors import ConfigError
 __all__ = [
     "PARKED",
     "PARK_ENV",
+    "ParkEvery",
     "park_root",
     "park_run",
     "parked_copies",
@@ -52,6 +57,8 @@ PARKED = "parked"
 """A campaign's folder of parked runs (beside ``runs/`` and ``finished/``)."""
 PARK_ENV = "ADVGAME_PARK"
 """The environment variable naming a folder for parked runs outside the work tree."""
+
+log = logging.getLogger(__name__)
 
 
 def park_root(out: Path) -> Path:
@@ -212,3 +219,66 @@ def unpark_run(parked: Path, run: Path) -> int:
     shutil.rmtree(run, ignore_errors=True)
     partial.rename(run)
     return iteration
+
+
+class ParkEvery:
+    """Park the runs a train stage trains every `seconds`, in a thread beside the training.
+
+    A session that ends without ``--park`` (a machine taken back, a process killed) then loses
+    at most `seconds` of each run, not everything since the last park: the train stage of
+    ``advgame campaign`` runs one while it trains (``--park-every``; every 30 minutes by default
+    when `PARK_ENV` is set). `park` is called with no arguments and returns the iteration each
+    run was parked at (`advgame.workflows.campaign.park_campaign` over the stage's runs). A
+    failed park is logged and tried again at the next tick; the training never sees it. Leaving
+    the block by ``KeyboardInterrupt`` parks once more (each run at its last checkpoint) before
+    the interrupt goes on.
+
+    Used as a context manager::
+
+        with ParkEvery(lambda: park_campaign(campaign, out, only=runs), 1800):
+            ...  # train
+    """
+
+    def __init__(self, park: Callable[[], Mapping[str, int]], seconds: float) -> None:
+        if not seconds > 0:
+            raise ConfigError(f"The time between parks must be > 0 seconds, got {seconds}.")
+        self.park, self.seconds = park, float(seconds)
+        self.parks = 0
+        """How many parks have completed (each a call of `park` that returned)."""
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def park_once(self) -> None:
+        """Park now; log what was parked, or why parking failed (never raises)."""
+        try:
+            parked = self.park()
+        except Exception as error:  # a run finishing or moving mid-park, a full disk: next tick
+            log.warning(
+                "campaign: parking failed (%s: %s); trying again later", type(error).__name__, error
+            )
+            return
+        self.parks += 1
+        if parked:
+            where = ", ".join(f"{run} at iteration {it}" for run, it in parked.items())
+            log.info("campaign: parked %s", where)
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.seconds):
+            self.park_once()
+
+    def __enter__(self) -> ParkEvery:
+        self._thread = threading.Thread(target=self._loop, name="advgame-park", daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+        if kind is not None and issubclass(kind, KeyboardInterrupt):
+            self.park_once()
