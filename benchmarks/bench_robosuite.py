@@ -3,7 +3,8 @@
 Three variants per scenario, in interleaved rounds so that machine noise hits them alike:
 
 * ``raw``: ``robosuite.make(...)`` as advgame builds it (no renderer, no cameras,
-  ``hard_reset=False``), stepped with random actions drawn before timing;
+  ``hard_reset=False``) with robosuite's own robot class (the games' robots keep their action
+  size, `advgame.scenarios.robosuite_lean`), stepped with random actions drawn before timing;
 * ``game``: the scenario's game with no disruptor, `Game.play` with the same actions (what the
   game adds: flattening the observation dict, validation, true reward/payoff, truncation);
 * ``game+adv``: the ``default`` preset (bounded observation and action adversaries, or the
@@ -31,8 +32,15 @@ HORIZON = 200
 
 
 def _raw(sid: str) -> tuple[Any, int]:
+    from robosuite.robots.fixed_base_robot import FixedBaseRobot
+
+    from advgame.scenarios.robosuite_lean import LeanFixedBaseRobot
+
     game = advgame.make(sid, disruptors=[])
     env = game.task.env  # the very robosuite env advgame built, used raw
+    for robot in env.robots:
+        if type(robot) is LeanFixedBaseRobot:
+            robot.__class__ = FixedBaseRobot  # robosuite's own step
     return env, env.action_dim
 
 

@@ -260,7 +260,11 @@ def _make_env(
         "horizon": 10**9,
         **kwargs,
     }
-    return robosuite.make(env_name, robots=robots, **options)
+    env = robosuite.make(env_name, robots=robots, **options)
+    from advgame.scenarios.robosuite_lean import lean_robots
+
+    lean_robots(env)  # the robots' action size kept, not rebuilt three times a substep
+    return env
 
 
 def _check_name(what: str, name: str, known: Any) -> None:
