@@ -218,6 +218,10 @@ def test_a_train_stage_with_park_every_leaves_a_parked_copy_when_it_is_killed(
     assert main([*args, "--park-every", "-1"]) == 2
     assert "--park-every must be >= 0 minutes" in capsys.readouterr().err
     assert main([*args, "--park-every", "0.002"]) == 130  # every 0.12 s
+    assert (
+        f"parking the runs it trains every 0.002 min in {outside / 'tiny'}"
+        in capsys.readouterr().out
+    )
     assert parked_iteration(parked) == 2
     assert not (tmp_path / "tiny" / "parked").exists()  # ADVGAME_PARK's folder, not the tree's
     assert json.loads((parked / "config.json").read_text())["iterations"] == 2

@@ -116,11 +116,16 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         if evaluated:
             print(f"in-training evaluation curves so far: {evaluated}")
         return 0
+    minutes = _park_minutes(args.park_every)
+    if minutes and args.stage != "evaluate":
+        from advgame.workflows.park import park_root
+
+        print(f"campaign: parking the runs it trains every {minutes:g} min in {park_root(out)}")
     path = run_campaign(
         campaign, out, workers=args.workers, executor=args.executor, address=args.address,
         stage=args.stage, max_runs=args.max_runs, progress=not args.no_progress,
         only=[r.strip() for r in args.runs.split(",") if r.strip()] if args.runs else None,
-        park_every=60 * _park_minutes(args.park_every),
+        park_every=60 * minutes,
     )  # fmt: skip
     print(f"campaign: {path}")
     if args.release is not None and args.stage != "train":
