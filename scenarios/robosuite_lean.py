@@ -35,9 +35,9 @@ class LeanFixedBaseRobot(FixedBaseRobot):
         parts = tuple(getattr(composite, "part_controllers", {}).values())
         kept = self.__dict__.get("_lean_action_dim")
         if kept is None or kept[0] is not composite or kept[1] != parts:
-            kept = (composite, parts, FixedBaseRobot.action_dim.fget(self))
+            kept = (composite, parts, int(FixedBaseRobot.action_dim.fget(self)))
             self.__dict__["_lean_action_dim"] = kept
-        return int(kept[2])
+        return kept[2]
 
 
 def lean_robots(env: Any) -> int:
