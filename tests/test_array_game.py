@@ -130,6 +130,15 @@ def test_l2_budget_and_probabilistic_actions() -> None:
     play_both(_game("Walker2d-v5", disruptors=spec), steps=80)
 
 
+def test_noisy_actions_and_some_observation_dimensions() -> None:
+    """The noisy mode's float64 mix of float32 actions and δ on a few dimensions, as one game's."""
+    spec = [
+        ObservationDisruptor(eps=0.2, dims=[4, 1, 7]),
+        ActionDisruptor(mode="noisy", alpha=0.3),
+    ]
+    play_both(_game("HalfCheetah-v5", disruptors=spec), steps=60)
+
+
 def test_normalized_budget() -> None:
     """A normalized-space budget scaled on every copy equals the single games scaled alike."""
     std = np.linspace(0.5, 2.0, 11)

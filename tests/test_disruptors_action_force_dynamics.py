@@ -112,6 +112,9 @@ def test_action_noisy_mixes_within_alpha(hopper, alpha, data):
     assert np.all(np.abs(new.astype(np.float64) - a) <= alpha * span + 1e-6)
     adv = space.low + (u + 1.0) * 0.5 * span
     np.testing.assert_allclose(new, (1 - alpha) * a + alpha * adv, rtol=0, atol=1e-6)
+    # bit for bit: the mix is float64 (a float32 action is widened first), then clipped and cast
+    mix = (1.0 - alpha) * a.astype(np.float64) + alpha * adv
+    np.testing.assert_array_equal(new, np.clip(mix, space.low, space.high).astype(space.dtype))
     if alpha == 0.0:
         assert np.array_equal(new, a)
 

@@ -5,8 +5,9 @@ one runtime per disruptor (the copies share its spec, so its budget) applies the
 rows of every copy at once. `ArrayHooks` is the part of `advgame.core.disruptor.Disruptor`
 that does it; its defaults apply the single-copy hook row by row (the same code, so the same
 values), and the observation, action and reward runtimes override them with one ``[M, ...]``
-sum, clip and cast written as the same operations, in the same dtypes, as their single-copy
-hook, so every row is the single game's value bit for bit (``tests/test_array_game.py``).
+sum, clip and cast: the observation and action ones call the very function their single-copy
+hook calls on one row (`advgame.disruptors.observation.moved`, `ActionRuntime.moved`), so
+every row is the single game's value bit for bit (``tests/test_array_game.py``).
 
 What an array hook cannot batch it still does row by row: draws from each copy's own
 generator (the probabilistic action mode, Discrete actions), Dict observations, L2

@@ -130,12 +130,12 @@ class ActionRuntime(AdditiveDisruptor):
         )  # deterministic and whole 1-D Boxes: `action_rows` stacks them
         t0, block0, space0, bounds0 = self._plan[0]
         self._lone = (
-            (t0, space0.dtype, bounds0)
+            (t0, space0, bounds0)
             if spec.mode == "additive" and len(self._plan) == 1 and block0 is None
             and isinstance(space0, spaces.Box)
             else None
         )  # fmt: skip
-        """(target, dtype, bounds) when `action` has one additive whole-Box target, else None."""
+        """(target, space, bounds) when `action` has one additive whole-Box target, else None."""
 
     def encode(self, value: Any) -> np.ndarray:
         """Raw units -> adversary action: an offset (additive) or the adversary's own action."""
@@ -177,12 +177,12 @@ class ActionRuntime(AdditiveDisruptor):
         return out
 
     def action(self, actions: dict[str, Any], u: np.ndarray, rng: np.random.Generator) -> None:
-        """Replace each target's action by its disrupted version."""
+        """Replace each target's action by its disrupted version (`moved`, or a draw)."""
         if self._lone is not None:  # additive on one whole Box: the loop below, its one case
-            t, dtype, bounds = self._lone
+            t, space, bounds = self._lone
             a = actions[t]
             if type(a) is np.ndarray and a.dtype.kind == "f" and a.dtype.itemsize <= 8:
-                actions[t] = clip_ufunc(a + u * self.unit, *bounds).astype(dtype)
+                actions[t] = self.moved(a, u, None, space, bounds)
                 return
         for t, block, space, bounds in self._plan:
             b = u if block is None else u[block]
@@ -190,21 +190,12 @@ class ActionRuntime(AdditiveDisruptor):
                 if rng.random() < self.alpha:
                     actions[t] = np.int64(space.start + int(np.argmax(b)))
                 continue
-            a = actions[t]
-            if self.mode == "additive":
-                # a float array enters the float64 sum exactly as its float64 copy would
-                exact = isinstance(a, np.ndarray) and a.dtype.kind == "f" and a.dtype.itemsize <= 8
-                unit = self.unit if block is None else self.unit[block]
-                new = (a if exact else np.asarray(a, dtype=np.float64)) + b * unit
+            a = _as_float(np.asarray(actions[t]))
+            if self.mode == "probabilistic":
+                new = _adversary_action(b, space) if rng.random() < self.alpha else a
+                actions[t] = clip_ufunc(new, *bounds).astype(space.dtype)
             else:
-                a = np.asarray(a, dtype=np.float64)
-                adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
-                if self.mode == "noisy":
-                    new = (1.0 - self.alpha) * a + self.alpha * adv
-                else:
-                    new = adv if rng.random() < self.alpha else a
-            # = np.clip(new, space.low, space.high): its ufunc, without the Python wrapper
-            actions[t] = clip_ufunc(new, *bounds).astype(space.dtype)
+                actions[t] = self.moved(a, b, block, space, bounds)
 
     def action_rows(
         self,
@@ -213,22 +204,18 @@ class ActionRuntime(AdditiveDisruptor):
         u: Any,
         rngs: Sequence[np.random.Generator],
     ) -> None:
-        """`action` over N alike games at once (additive and noisy modes: no draws).
+        """`action` over N alike games at once: their rows stacked, then `action_array`.
 
-        Every row gets exactly the single game's value (the same float64 arithmetic, clip and
-        cast); the probabilistic mode and Discrete actions draw from each game's own generator,
-        so each peer disrupts its own row.
+        The probabilistic mode and Discrete actions draw from each game's own generator, and
+        peers with another budget disrupt their own rows, so each peer then acts on its own.
         """
         if not (self._flat and isinstance(u, np.ndarray) and self._same_unit(peers)):
             super().action_rows(peers, actions, u, rngs)
             return
-        for t, block, space, bounds in self._plan:
-            b = u if block is None else u[:, block]
-            a = np.array([acts[t] for acts in actions])  # np.stack: same, slower
-            if a.dtype.kind != "f":  # as `action`: a non-float action enters as float64
-                a = a.astype(np.float64)
-            new = self._rows_moved(a, b, block, space, bounds)
-            for acts, row in zip(actions, new, strict=True):
+        stacked = {t: np.array([acts[t] for acts in actions]) for t in self.targets}
+        self.action_array(stacked, u, rngs)  # np.array of the rows: np.stack's value, faster
+        for t, rows in stacked.items():
+            for acts, row in zip(actions, rows, strict=True):
                 acts[t] = row
 
     def action_array(
@@ -236,32 +223,43 @@ class ActionRuntime(AdditiveDisruptor):
     ) -> None:
         """`action` of every row at once (additive and noisy modes on 1-D Boxes: no draws).
 
-        Each row gets exactly the single copy's value; the probabilistic mode and Discrete
-        actions draw from each copy's own generator, row by row.
+        Each row gets exactly the single copy's value (the same `moved`); the probabilistic
+        mode and Discrete actions draw from each copy's own generator, row by row.
         """
         if not self._flat:
             super().action_array(actions, u, rngs)
             return
         for t, block, space, bounds in self._plan:
             b = u if block is None else u[:, block]
-            a = actions[t]
-            if a.dtype.kind != "f" or a.dtype.itemsize > 8:  # as `action`: enters as float64
-                a = a.astype(np.float64)
-            actions[t] = self._rows_moved(a, b, block, space, bounds)
+            actions[t] = self.moved(_as_float(actions[t]), b, block, space, bounds)
 
-    def _rows_moved(
+    def moved(
         self, a: np.ndarray, b: np.ndarray, block: Any, space: spaces.Box, bounds: Any
     ) -> np.ndarray:
-        """Rows `a` of one 1-D Box moved by the adversary's rows `b`, clipped to the space.
+        """Action `a` of one Box target moved by the adversary's `b`, clipped, cast to the space.
 
-        The additive or noisy mode's arithmetic of `action`, on every row at once.
+        The additive or noisy mode's arithmetic, the one implementation that the single game,
+        the lockstep rows and the array game all apply: `a` and `b` are one action ``[n]`` or
+        rows ``[M, n]`` alike (`block`: the target's part of `unit`; `a` a float array).
         """
         if self.mode == "additive":
             new = a + b * (self.unit if block is None else self.unit[block])
         else:
-            adv = space.low + (b + 1.0) * 0.5 * (space.high - space.low)
-            new = (1.0 - self.alpha) * a.astype(np.float64) + self.alpha * adv
+            # float64 first: a float32 `a` times a Python float would stay float32
+            new = (1.0 - self.alpha) * a.astype(np.float64) + self.alpha * _adversary_action(
+                b, space
+            )
         return clip_ufunc(new, *bounds).astype(space.dtype)  # `ndarray.clip`'s own ufunc
+
+
+def _as_float(a: np.ndarray) -> np.ndarray:
+    """`a` as it enters the float64 sums: a float array as it is (exactly its float64 copy)."""
+    return a if a.dtype.kind == "f" and a.dtype.itemsize <= 8 else a.astype(np.float64)
+
+
+def _adversary_action(b: np.ndarray, space: spaces.Box) -> np.ndarray:
+    """The adversary's own action ``ā``: ``u ∈ [-1, 1]`` mapped linearly onto the space's bounds."""
+    return space.low + (b + 1.0) * 0.5 * (space.high - space.low)
 
 
 def _size(space: spaces.Box | spaces.Discrete) -> int:

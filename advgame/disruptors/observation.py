@@ -22,7 +22,7 @@ from advgame.errors import BudgetError, ConfigError, UnknownNameError, did_you_m
 if TYPE_CHECKING:
     from advgame.core.task import TaskBase
 
-__all__ = ["ObservationDisruptor", "ObservationRuntime"]
+__all__ = ["ObservationDisruptor", "ObservationRuntime", "moved"]
 
 Bounds = tuple[np.ndarray, np.ndarray] | None
 
@@ -285,12 +285,12 @@ class ObservationRuntime(AdditiveDisruptor):
         return out
 
     def observation(self, observations: dict[str, Any], u: np.ndarray) -> None:
-        """Add δ to each target's observation, clipped into its observation space."""
+        """Add δ to each target's observation, clipped into its observation space (`moved`)."""
         if self._lone is not None:  # one whole 1-D Box target: the loop below, its one case
             target, box, box_bounds = self._lone
             obs = observations[target]
             if obs.ndim == 1:
-                observations[target] = _into(obs + self.perturbation(u), box, box_bounds)
+                observations[target] = moved(obs, self.perturbation(u), None, box, box_bounds)
                 return
         delta = self.perturbation(u)
         for t, block, full, space, bounds in self._plan:
@@ -299,39 +299,30 @@ class ObservationRuntime(AdditiveDisruptor):
             if space is None:  # a Dict observation: a new dict, the true one untouched
                 observations[t] = dict_obs.perturb(obs, self.plans[t], d)
                 continue
-            if full and obs.ndim == 1:
-                new = obs + d
-            else:
-                new = np.array(obs, dtype=np.float64).reshape(-1)
-                new[self.dims[t]] += d
-                new = new.reshape(space.shape)
-            observations[t] = _into(new, space, bounds)
+            whole = full and len(space.shape) == 1
+            observations[t] = moved(obs, d, None if whole else self.dims[t], space, bounds)
 
     def observation_rows(
         self, peers: Sequence[Any], observations: Sequence[dict[str, Any]], u: Any
     ) -> None:
-        """`observation` over N alike games at once: ``[N, dims]`` sums and clips per target.
+        """`observation` over N alike games at once: their rows stacked, then `observation_array`.
 
-        Every row gets exactly the single game's value (the same float64 sum, clip and cast);
-        when the peers' budgets differ (e.g. another normalizer std) or an observation is not a
-        flat Box, each peer perturbs its own row.
+        When the peers' budgets differ (e.g. another normalizer std) or an observation is not
+        a whole flat Box, each peer perturbs its own row.
         """
         if not (self._flat and isinstance(u, np.ndarray) and self._same_unit(peers)):
             super().observation_rows(peers, observations, u)
             return
-        delta = self.perturbation(u)
-        for t, block, _, space, bounds in self._plan:
-            assert space is not None  # `_flat`: every target a Box
-            new = np.array([obs[t] for obs in observations])  # np.stack: same, slower
-            new = _into(new + (delta if block is None else delta[:, block]), space, bounds)
-            for obs, row in zip(observations, new, strict=True):
+        stacked = {t: np.array([obs[t] for obs in observations]) for t in self.targets}
+        self.observation_array(stacked, u)  # np.array of the rows: np.stack's value, faster
+        for t, rows in stacked.items():
+            for obs, row in zip(observations, rows, strict=True):
                 obs[t] = row
 
     def observation_array(self, observations: dict[str, np.ndarray], u: np.ndarray) -> None:
-        """`observation` of every row at once: ``[M, dims]`` sums and clips per target.
+        """`observation` of every row at once: ``[M, dims]`` sums and clips per target (`moved`).
 
-        Each row gets exactly the single copy's value (the same float64 sum, clip and cast);
-        Dict observations go row by row.
+        Each row gets exactly the single copy's value; Dict observations go row by row.
         """
         if self.plans or any(space is None or len(space.shape) != 1 for *_, space, _ in self._plan):
             super().observation_array(observations, u)
@@ -340,13 +331,27 @@ class ObservationRuntime(AdditiveDisruptor):
         for t, block, full, space, bounds in self._plan:
             assert space is not None  # no Dict plans (checked above)
             d = delta if block is None else delta[:, block]
-            obs = observations[t]
-            if full:
-                new = obs + d
-            else:
-                new = np.array(obs, dtype=np.float64)
-                new[:, self.dims[t]] += d
-            observations[t] = _into(new, space, bounds)
+            dims = None if full else self.dims[t]
+            observations[t] = moved(observations[t], d, dims, space, bounds)
+
+
+def moved(
+    obs: np.ndarray, d: np.ndarray, dims: np.ndarray | None, space: spaces.Box, bounds: Bounds
+) -> np.ndarray:
+    """A Box observation plus its δ, clipped into `space` (its `bounds`) and cast to its dtype.
+
+    The one implementation of the perturbation that the single game, the lockstep rows and the
+    array game all apply: `obs` is one observation (shape ``space.shape``) or rows of them
+    (``[M, *space.shape]``), `d` the matching δ (``[k]`` or ``[M, k]``) for the flat indices
+    `dims` (``None``: a 1-D space's every component, in order). The sum is float64, as the
+    float64 δ makes it.
+    """
+    if dims is None:
+        return _into(obs + d, space, bounds)
+    lead = obs.shape[: obs.ndim - len(space.shape)]  # () for one observation, (M,) for rows
+    new = np.array(obs, dtype=np.float64).reshape(*lead, -1)
+    new[..., dims] += d
+    return _into(new.reshape(*lead, *space.shape), space, bounds)
 
 
 def _into(new: np.ndarray, space: spaces.Box, bounds: Bounds) -> np.ndarray:
