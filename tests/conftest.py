@@ -198,7 +198,7 @@ CORE_FILES = frozenset(
         "whitebox", "sb3", "training_run", "training_learners", "training_population_config", "cli",
         "not_applicable", "robust_sarsa", "attack_batch",
         "fuzz_config", "fuzz_train_eval", "corrupt_files", "sa_ppo", "pgd_at",
-        "train_config_game", "mujoco_batch", "mujoco_lean", "native_step", "relay",
+        "train_config_game", "mujoco_batch", "mujoco_lean", "native_step", "relay", "mujoco_timers",
     )
 )  # fmt: skip
 """The modules of the core subset (marker ``core``): the game, its views and vector paths,

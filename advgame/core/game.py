@@ -43,6 +43,7 @@ from advgame.core.moves import (
     package,
 )
 from advgame.core.moving import Moves
+from advgame.core.mujoco_timers import quiet_timers
 from advgame.core.policy import AgentInfo
 from advgame.core.schedule import PHASES, Schedule
 from advgame.core.task import TaskBase
@@ -230,6 +231,7 @@ class Game(Moves, ParallelEnv):
         for d in self.disruptors.values():
             d.reset()
         obs, info = self.task.reset(seed)
+        quiet_timers()  # the task may have made an MjData, which sets MuJoCo's timers again
         self.t = 0
         self.agents = list(self.possible_agents)
         self._last = {}

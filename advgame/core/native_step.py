@@ -34,13 +34,14 @@ costs no Python per env either; `BatchPointers` keeps the addresses.
 from __future__ import annotations
 
 import functools
-import glob
 import operator
 import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+
+from advgame.core.mujoco_timers import mujoco_library
 
 __all__ = ["NATIVE_VAR", "BatchPointers", "Layout", "PointerCache", "native_loop"]
 
@@ -69,24 +70,10 @@ def native_loop() -> Callable[..., None] | None:
         import numba
     except ImportError:
         return None
-    library = _library()
+    library = mujoco_library()
     if library is None:
         return None
     return _compile(numba, library)
-
-
-def _library() -> Any:
-    """MuJoCo's shared library as the bindings loaded it (the same file: the same handle)."""
-    import ctypes
-
-    import mujoco
-
-    folder = os.path.dirname(mujoco.__file__)
-    found = sorted(glob.glob(os.path.join(folder, f"libmujoco.so.{mujoco.__version__}")))
-    found = found or sorted(glob.glob(os.path.join(folder, "libmujoco*.so*")))
-    if not found:  # macOS and Windows wheels name it otherwise: the bindings' loop runs there
-        return None
-    return ctypes.CDLL(found[0])
 
 
 def _compile(numba: Any, library: Any) -> Callable[..., None]:

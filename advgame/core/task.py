@@ -15,6 +15,7 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from advgame.core.mujoco_timers import quiet_timers
 from advgame.errors import ConfigError, UnknownNameError, did_you_mean
 
 __all__ = ["ArrayResult", "GymTask", "MujocoSim", "StepResult", "TaskBase"]
@@ -156,6 +157,7 @@ class MujocoSim:
         self._owner.model = model
         self._owner.data = data
         self.epoch += 1
+        quiet_timers()  # a new MjData sets MuJoCo's timers again
         renderer = getattr(self._owner, "mujoco_renderer", None)
         if renderer is not None:  # viewers hold the old model; rebuild them lazily
             renderer.model, renderer.data = model, data
