@@ -3,7 +3,10 @@
 Part 1, N copies of a MuJoCo v5 task (``--env``, default HalfCheetah-v5) for N in ``--n``
 (default 1, 8, 64), random actions drawn before timing, every variant stepping the same actions:
 
-* ``sync``: Gymnasium's ``SyncVectorEnv`` of N ``gymnasium.make(env)`` over the raw task (1.00).
+* ``sync``: Gymnasium's ``SyncVectorEnv`` of N ``gymnasium.make(env)`` over the raw task (1.00),
+  with MuJoCo's profiling timers on, as MuJoCo's Python bindings set them.
+* ``sync-quiet``: the same with those timers off, as the games run (`advgame.core.mujoco_timers`):
+  the games' own cost is the ratio to it; ``sync-quiet / sync`` per round is printed.
 * ``floor``: the same N unwrapped envs' simulators stepped by a bare Python loop (controls
   written, ``mj_step``; no observation, reward or game): the least Python per copy of any design
   that keeps one ``MjData`` a copy, so its ratio bounds what the array game reaches on one thread.
@@ -24,7 +27,7 @@ Part 1, N copies of a MuJoCo v5 task (``--env``, default HalfCheetah-v5) for N i
   ``python -m venv .venv-envpool`` layered over this one and ``pip install envpool``).
 
 Part 2, one copy (on unless ``--no-single``; ``--single-only`` skips part 1): the raw env
-(``gymnasium.make``, its wrappers), a `Game` of preset ``default`` played through ``play`` (a
+(``gymnasium.make``, its wrappers; timers on, and ``raw-quiet`` off), a `Game` of preset ``default`` played through ``play`` (a
 sense and an act move) and through ``step`` (the ParallelEnv form: every agent's action in,
 five per-agent dicts out), and the array game of one copy; the adversaries' uniform actions are
 drawn before timing, as the protagonist's are.
@@ -185,11 +188,20 @@ class _Floor:
             env.close()
 
 
+SHIPPED = ("sync", "floor", "raw")
+"""Variants that run with MuJoCo's profiling timers on, as the bindings set them (`measure`)."""
+
+
+def _sync(env_id: str, n: int) -> Any:
+    return gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n)
+
+
 def _variants(
     env_id: str, n: int, threads: list[int], bindings: bool = False
 ) -> dict[str, Callable[[], Any]]:
     out: dict[str, Callable[[], Any]] = {
-        "sync": lambda: gym.vector.SyncVectorEnv([lambda: gym.make(env_id)] * n),
+        "sync": functools.partial(_sync, env_id, n),
+        "sync-quiet": functools.partial(_sync, env_id, n),
         "floor": functools.partial(_Floor, env_id, n),
     }
     for k in threads:
@@ -219,7 +231,14 @@ def measure(
     chunk: int,
     clock: Callable[[], float] = time.perf_counter,
 ) -> dict[str, list[float]]:
-    """Env-steps/s of every variant per round, interleaved, timed by `clock`."""
+    """Env-steps/s of every variant per round, interleaved, timed by `clock`.
+
+    Before each variant's segment MuJoCo's profiling timers (`advgame.core.mujoco_timers`) are
+    set as that variant runs them in a process of its own: on, as MuJoCo's bindings set them,
+    for the raw references in `SHIPPED`; off for the games (which switch them off) and for the
+    ``-quiet`` references (the same raw envs without them: the game's own cost beside them).
+    """
+    slot, shipped = _timer_states()
     space = gym.make(env_id).action_space
     assert isinstance(space, gym.spaces.Box)
     actions = np.random.default_rng(0).uniform(space.low, space.high, (chunk, n, *space.shape))
@@ -233,6 +252,7 @@ def measure(
     for _ in range(rounds):
         for name, env in envs.items():
             acts = actions.astype(np.float64 if name.startswith("envpool") else np.float32)
+            slot.value = shipped if name in SHIPPED else None
             start = clock()
             for a in acts:
                 env.step(a)
@@ -240,6 +260,20 @@ def measure(
     for env in envs.values():
         env.close()
     return rates
+
+
+def _timer_states() -> tuple[Any, int]:
+    """MuJoCo's ``mjcb_time`` slot and the timer the bindings install in it."""
+    import mujoco
+
+    from advgame.core.mujoco_timers import timer_slot
+
+    slot = timer_slot()
+    assert slot is not None, "MuJoCo's mjcb_time is not reachable on this platform"
+    slot.value = None
+    mujoco.MjData(mujoco.MjModel.from_xml_string("<mujoco/>"))  # the bindings set theirs
+    assert slot.value, "MuJoCo's bindings no longer set a timer: drop the -quiet columns"
+    return slot, slot.value
 
 
 def _row(label: str, rates: dict[str, list[float]], base: str) -> str:
@@ -284,6 +318,8 @@ def main() -> None:
         rates = measure(variants, args.env, n, args.rounds, args.chunk, clock)
         print(f"| {args.env} N | sync steps/s | " + " | ".join(k for k in rates if k != "sync"))
         print(_row(str(n), rates, "sync"))
+        ratios = [q / s for q, s in zip(rates["sync-quiet"], rates["sync"], strict=True)]
+        print(f"  sync without / with MuJoCo's timers, per round: {quartiles(ratios)}")
         for k in threads:  # the array game against EnvPool directly, round by round
             a, e = rates.get(f"array-t{k}"), rates.get(f"envpool-t{k}")
             if a and e:
@@ -296,6 +332,7 @@ def main() -> None:
     if args.single or args.single_only:
         single = {
             "raw": lambda: _Raw(args.env),
+            "raw-quiet": lambda: _Raw(args.env),
             "game": lambda: _Single(args.env),
             "parallel-env": lambda: _Single(args.env, pettingzoo=True),
             "array-1": lambda: _Array(args.env, 1, 1),
@@ -303,10 +340,12 @@ def main() -> None:
         rates = measure(single, args.env, 1, args.rounds, args.chunk * 8, clock)
         _calibrate(args.clock)  # the load may have moved during the run: before and after
         print(
-            f"| {args.env} single ({args.clock} time) | raw steps/s | game (`play`) "
-            "| ParallelEnv (`step`) | array game of one |"
+            f"| {args.env} single ({args.clock} time) | raw steps/s | raw, timers off "
+            "| game (`play`) | ParallelEnv (`step`) | array game of one |"
         )
         print(_row("1", rates, "raw"))
+        ratios = [g / q for g, q in zip(rates["game"], rates["raw-quiet"], strict=True)]
+        print(f"  game / raw with timers off too, per round: {quartiles(ratios)}")
 
 
 def _calibrate(clock: str) -> None:
