@@ -13,7 +13,9 @@ recompiles the model, and `advgame.core.physics.ThreadedStepper` before every ba
 since the callback is global to the process, simulators stepped outside the games (a raw
 ``gymnasium.make`` env beside them) then run without it too, until the bindings make another
 ``MjData``. Set the environment variable `TIMERS_VAR` to ``1`` to keep MuJoCo's timers (to
-profile with ``MjData.timer``).
+profile with ``MjData.timer``). Clearing the callback while another thread steps is safe:
+MuJoCo reads the pointer once for each reading, tests it and calls what it read (``mj_step``
+in the 3.9 library, disassembled).
 """
 
 from __future__ import annotations
