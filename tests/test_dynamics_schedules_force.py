@@ -216,3 +216,30 @@ def test_sinusoid_preset_sets_gravity_per_episode_on_ant():
         assert len(set(np.round(firsts, 4))) == n_episodes
     finally:
         game.close()
+
+
+@pytest.mark.parametrize(
+    "schedule",
+    [
+        Schedule(),
+        Schedule(every=3, start=2, stop=41),
+        Schedule(once_per_episode=True, start=5),
+        Schedule(probability=0.4, start=1, every=2),
+        Schedule(probability=0.7, phase="eval"),
+    ],
+)
+@pytest.mark.parametrize("phase", ["train", "eval"])
+def test_schedule_rows_are_each_copys_own_schedule(schedule, phase):
+    """`active_rows` of N copies = `is_active` of each copy, the same draws from each generator."""
+    n = 120
+    t = np.arange(n) % 60  # every step of the window's edges, each copy twice
+    live = np.random.default_rng(7).random(n) < 0.8
+    rows = schedule.active_rows(t, phase, [np.random.default_rng(i) for i in range(n)], live)
+    singles = [np.random.default_rng(i) for i in range(n)]
+    one = [bool(live[i]) and schedule.is_active(int(t[i]), phase, singles[i]) for i in range(n)]
+    np.testing.assert_array_equal(rows, one)
+    assert rows.dtype == np.bool_
+    after = [np.random.default_rng(i) for i in range(n)]
+    schedule.active_rows(t, phase, after, live)
+    for a, b in zip(after, singles, strict=True):  # each generator drew as often
+        assert a.random() == b.random()

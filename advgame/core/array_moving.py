@@ -22,7 +22,6 @@ from gymnasium import spaces
 from advgame.core.checks import all_set, any_set
 from advgame.core.disruptor import Disruptor
 from advgame.core.moves import protagonist_rows
-from advgame.core.schedule import Schedule
 from advgame.core.task import TaskBase
 from advgame.errors import ActionError
 
@@ -178,7 +177,7 @@ class ArrayMoves:
         for d in self.disruptors.values():
             value = d.schedule.constant(phase)
             if value is None:
-                self._active[d.agent] = self._draw(d.schedule, live)
+                self._active[d.agent] = d.schedule.active_rows(self.t, phase, self._rngs, live)
             else:  # constant in this phase (the phase may have changed since the last step)
                 self._active[d.agent][live] = value
         shown = {p: v.copy() for p, v in self._true.items()}
@@ -190,23 +189,6 @@ class ArrayMoves:
                 rows = ~self._active[d.agent] & self._has_last[d.agent] & live
                 self._apply_obs(d, shown, self._last[d.agent], rows)
         self._shown = shown
-
-    def _draw(self, schedule: Schedule, live: np.ndarray) -> np.ndarray:
-        """`Schedule.is_active` of every live copy's step, draws from each copy's generator."""
-        t = self.t
-        if not schedule.in_phase(self.phase):
-            return np.zeros(self.n, np.bool_)
-        on = live & (t >= schedule.start)
-        if schedule.stop is not None:
-            on &= t < schedule.stop
-        if schedule.once_per_episode:
-            on &= t == schedule.start
-        else:
-            on &= (t - schedule.start) % schedule.every == 0
-        if schedule.probability < 1.0:
-            for i in np.flatnonzero(on):
-                on[i] = self._rngs[i].random() < schedule.probability
-        return on
 
     # -- helpers --------------------------------------------------------------------------------
     def _require(self, mask: np.ndarray | None = None) -> None:

@@ -6,6 +6,7 @@ in-training setting disrupts in both; its post-training setting only in ``"eval"
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -140,3 +141,26 @@ class Schedule:
                 raise ConfigError("A probabilistic Schedule needs a random generator.")
             return bool(rng.random() < self.probability)
         return True
+
+    def active_rows(
+        self, t: np.ndarray, phase: str, rngs: Sequence[np.random.Generator], live: np.ndarray
+    ) -> np.ndarray:
+        """`is_active` of N copies at once: row ``i`` at step ``t[i]`` (``[N]`` bool).
+
+        The same rules over arrays (`advgame.core.array_game.ArrayGame`); the probability is
+        drawn from ``rngs[i]`` for each live copy that passes the other rules, in row order, as
+        each copy's own game would draw it. Copies not `live` are inactive and draw nothing.
+        """
+        if not self.in_phase(phase):
+            return np.zeros(len(t), np.bool_)
+        on = live & (t >= self.start)
+        if self.stop is not None:
+            on &= t < self.stop
+        if self.once_per_episode:
+            on &= t == self.start
+        else:
+            on &= (t - self.start) % self.every == 0
+        if self.probability < 1.0:
+            for i in np.flatnonzero(on):
+                on[i] = rngs[i].random() < self.probability
+        return on
