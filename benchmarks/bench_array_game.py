@@ -27,10 +27,10 @@ Part 1, N copies of a MuJoCo v5 task (``--env``, default HalfCheetah-v5) for N i
   ``python -m venv .venv-envpool`` layered over this one and ``pip install envpool``).
 
 Part 2, one copy (on unless ``--no-single``; ``--single-only`` skips part 1): the raw env
-(``gymnasium.make``, its wrappers; timers on, and ``raw-quiet`` off), a `Game` of preset ``default`` played through ``play`` (a
-sense and an act move) and through ``step`` (the ParallelEnv form: every agent's action in,
-five per-agent dicts out), and the array game of one copy; the adversaries' uniform actions are
-drawn before timing, as the protagonist's are.
+(``gymnasium.make``, its wrappers; timers on, and ``raw-quiet`` off), a `Game` of preset
+``default`` played through ``play`` (a sense and an act move) and through ``step`` (the
+ParallelEnv form: every agent's action in, five per-agent dicts out), and the array game of one
+copy; the adversaries' uniform actions are drawn before timing, as the protagonist's are.
 
 The variants are interleaved for ``--rounds`` rounds of ``--chunk`` vector steps and each is
 compared with ``sync`` (or the raw env) of the same round. Printed: a calibration line

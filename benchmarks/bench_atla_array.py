@@ -16,7 +16,8 @@ on (``ADVGAME_MUJOCO_TIMERS=1``, as before the games switched them off:
 Each round runs both, in alternating order (the second way first in even rounds).
 
 Printed: a calibration line (`benchmarks/calibrate.py`), each round's environment steps per
-second both ways, and the median per-round ratio array / lockstep. Torch runs on one thread.
+second both ways, and the median per-round ratio array / lockstep (or / array with timers).
+Torch runs on one thread.
 Run on quiet cores: ``python benchmarks/bench_atla_array.py`` (``--n-envs``, ``--rounds``).
 """
 
@@ -94,12 +95,12 @@ def main() -> None:
     load = os.getloadavg()[0]
     print(f"calibration: raw HalfCheetah-v5 step {step_us(5_000, 3):.1f} µs (load {load:.2f})")
     ratios = []
+    other = "array with timers" if args.timers else "lockstep"
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(args.rounds):
             # the order alternates by round (ABBA...), so that drift within a round, or what the
             # first iteration leaves behind for the second, does not favour one path
             rates = {}
-            other = "array with timers" if args.timers else "lockstep"
             for today in (False, True) if r % 2 == 0 else (True, False):
                 array, timers = today or args.timers, not today and args.timers
                 path = Path(tmp) / f"{'array' if today else 'other'}{r}"
