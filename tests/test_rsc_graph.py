@@ -184,3 +184,38 @@ def test_on_rs_liftcausal_the_colour_stays_the_colour_in_augmented_rows() -> Non
     assert float((predicted[:, colour] - shown).abs().max()) < 0.1
     recoloured = (shown != obs[:, colour]).any(dim=1)
     assert int(recoloured.sum()) > 0  # Eq. 7 moved some colours, and they stayed moved
+
+
+def test_clipped_augmentation_stays_inside_the_range_the_model_trained_on(trained) -> None:
+    th.manual_seed(5)
+    pool = one_step_samples(trained.replay_buffer, 1024)
+    stats = trained.world_model.targets
+    data = th.cat([pool.next_observations, pool.rewards], dim=1)
+    assert bool(
+        (stats.low <= data.min(0).values).all() and (stats.high >= data.max(0).values).all()
+    )
+    states = pool.observations * 3.0  # far outside what the world model has seen
+    trained.world_model.clip_to_support = False
+    free = th.cat(trained.world_model.predict(states, pool.actions), dim=1)
+    trained.world_model.clip_to_support = True
+    try:
+        clipped = th.cat(trained.world_model.predict(states, pool.actions), dim=1)
+    finally:
+        trained.world_model.clip_to_support = False
+    outside = (free < stats.low) | (free > stats.high)
+    assert int(outside.sum()) > 0  # so the clip has something to do
+    assert bool(((clipped >= stats.low) & (clipped <= stats.high)).all())
+    assert clipped[~outside].equal(free[~outside])
+
+
+def test_a_world_model_saved_without_its_range_loads_and_clips_nothing() -> None:
+    model = CausalWorldModel(3, 1)
+    old = {k: v for k, v in model.state_dict().items() if not k.endswith(("low", "high"))}
+    fresh = CausalWorldModel(3, 1, clip_to_support=True)
+    fresh.load_state_dict(old)  # strict: the range is filled in, not missing
+    assert th.isinf(fresh.targets.low).all() and th.isinf(fresh.targets.high).all()
+    obs, actions = th.randn(8, 3), th.randn(8, 1)
+    fresh.clip_to_support = False
+    free = th.cat(fresh.predict(obs, actions), dim=1)
+    fresh.clip_to_support = True
+    assert th.cat(fresh.predict(obs, actions), dim=1).equal(free)

@@ -76,6 +76,10 @@ class RSCConfig(_OffPolicyConfig):
     may predict a variable from a correlated stand-in, e.g. the cube's colour from its side,
     and then an augmented colour does not stay the colour)."""
 
+    clip_to_support: bool = False
+    """Clip each augmented next-state and reward dimension to the range of the world model's
+    training targets (ours; docs/causal.md, "RS-DoorCausal's RSC")."""
+
     def __post_init__(self) -> None:
         super().__post_init__()
         if not (isinstance(self.augmented_ratio, (int, float)) and 0 <= self.augmented_ratio <= 1):
@@ -109,5 +113,6 @@ class RSCConfig(_OffPolicyConfig):
             model_hidden=self.model_hidden, model_lr=self.model_lr, graph_lr=self.graph_lr,
             sparsity=self.sparsity, temperature=self.temperature, model_warmup=self.model_warmup,
             graph_draws=self.graph_draws, keep_self_edges=self.keep_self_edges,
+            clip_to_support=self.clip_to_support,
             **self._off_policy(seed, total_steps, tensorboard_log),
         )  # fmt: skip

@@ -28,6 +28,7 @@ the graph's most probable edges (probability > 0.5).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import torch as th
 from torch import nn
@@ -40,17 +41,31 @@ GRAPH_DRAWS = ("hard", "relaxed")
 
 
 class RunningNorm(nn.Module):
-    """Per-dimension running mean and variance, merged batch by batch; saved as buffers."""
+    """Per-dimension running mean, variance, lowest and highest value, merged batch by batch.
+
+    All are saved as buffers. ``low`` and ``high`` (the range of every row merged so far; an
+    empty one, +inf to −inf, before the first) are newer than the rest: a state dict saved
+    before them loads with the empty range, and the range grows from the next batch on.
+    """
 
     mean: th.Tensor
     var: th.Tensor
     count: th.Tensor
+    low: th.Tensor
+    high: th.Tensor
 
     def __init__(self, size: int) -> None:
         super().__init__()
         self.register_buffer("mean", th.zeros(size))
         self.register_buffer("var", th.ones(size))
         self.register_buffer("count", th.zeros(()))
+        self.register_buffer("low", th.full((size,), th.inf))
+        self.register_buffer("high", th.full((size,), -th.inf))
+
+    def _load_from_state_dict(self, state_dict: dict, prefix: str, *args: Any) -> None:
+        for name in ("low", "high"):  # checkpoints from before 7 Dec 2026 have no range
+            state_dict.setdefault(prefix + name, getattr(self, name).clone())
+        super()._load_from_state_dict(state_dict, prefix, *args)
 
     @th.no_grad()
     def update(self, x: th.Tensor) -> None:
@@ -64,6 +79,12 @@ class RunningNorm(nn.Module):
         self.mean += delta * n / total
         self.var.copy_(m2 / total)
         self.count.fill_(total)
+        th.minimum(self.low, x.min(0).values, out=self.low)
+        th.maximum(self.high, x.max(0).values, out=self.high)
+
+    def clip(self, x: th.Tensor) -> th.Tensor:
+        """`x` clipped, per dimension, to the range of the rows merged so far (none: as it is)."""
+        return th.where(self.low <= self.high, th.minimum(th.maximum(x, self.low), self.high), x)
 
     def normalize(self, x: th.Tensor) -> th.Tensor:
         """``(x − mean) / std``."""
@@ -97,6 +118,8 @@ class CausalWorldModel(nn.Module):
             (Gumbel-Softmax draws): see `losses`.
         keep_self_edges: give every state output its own past, ``s[i] → s'[i]``, as an edge
             that is always present, out of the sparsity term and the graph's draws.
+        clip_to_support: clip each predicted ``(s', r)`` dimension to the range of the targets
+            the model has trained on (`predict`).
 
     """
 
@@ -115,8 +138,10 @@ class CausalWorldModel(nn.Module):
         init_logit: float = 2.0,
         graph_draws: str = "hard",
         keep_self_edges: bool = True,
+        clip_to_support: bool = False,
     ) -> None:
         super().__init__()
+        self.clip_to_support = clip_to_support
         self.obs_dim, self.act_dim = obs_dim, act_dim
         n_in, n_out = obs_dim + act_dim, obs_dim + 1
         self.sparsity, self.temperature, self.sigma = sparsity, temperature, sigma
@@ -255,9 +280,15 @@ class CausalWorldModel(nn.Module):
 
     @th.no_grad()
     def predict(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
-        """``(s', r)`` under the most probable graph, in the data's own units (r: shape (n, 1))."""
+        """``(s', r)`` under the most probable graph, in the data's own units (r: shape (n, 1)).
+
+        With `clip_to_support`, each dimension is clipped to the range of the targets trained
+        on, so no generated next state or reward lies beyond what the data has shown.
+        """
         x = self.inputs.normalize(th.cat([obs, actions], dim=1).float())
         out = self.targets.denormalize(self(x, self.mode_graph()))
+        if self.clip_to_support:
+            out = self.targets.clip(out)
         return out[:, : self.obs_dim], out[:, self.obs_dim :]
 
 

@@ -94,6 +94,7 @@ class RSC(SAC):
         model_warmup: world-model updates before the first augmented row.
         graph_draws: ``"hard"`` (Bernoulli draws, score-function gradient) or ``"relaxed"``.
         keep_self_edges: each state output's own past, ``s[i] → s'[i]``, is always an edge.
+        clip_to_support: augmented next states and rewards clipped to the data's range.
     """
 
     def __init__(
@@ -114,6 +115,7 @@ class RSC(SAC):
         model_warmup: int = 1000,
         graph_draws: str = "hard",
         keep_self_edges: bool = True,
+        clip_to_support: bool = False,
         _init_setup_model: bool = True,
         **kwargs: Any,
     ) -> None:
@@ -124,6 +126,7 @@ class RSC(SAC):
         self.model_hidden, self.model_lr, self.graph_lr = model_hidden, model_lr, graph_lr
         self.sparsity, self.temperature, self.model_warmup = sparsity, temperature, model_warmup
         self.graph_draws, self.keep_self_edges = graph_draws, keep_self_edges
+        self.clip_to_support = clip_to_support
         self.counts = {"model": 0, "critic": 0, "actor": 0, "real_rows": 0, "augmented_rows": 0}
         """Updates (by network) and SAC batch rows (real, augmented) so far."""
         super().__init__(policy, env, _init_setup_model=False, **kwargs)
@@ -141,6 +144,7 @@ class RSC(SAC):
             obs, act, hidden=self.model_hidden, lr=self.model_lr, graph_lr=self.graph_lr,
             sparsity=self.sparsity, temperature=self.temperature, sigma=self.vae_sigma,
             graph_draws=self.graph_draws, keep_self_edges=self.keep_self_edges,
+            clip_to_support=self.clip_to_support,
         )  # fmt: skip
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
