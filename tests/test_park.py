@@ -231,3 +231,27 @@ def test_a_train_stage_with_park_every_leaves_a_parked_copy_when_it_is_killed(
     assert _park_minutes(None) == 30.0  # ADVGAME_PARK set: every half hour unless told
     monkeypatch.delenv("ADVGAME_PARK")
     assert (_park_minutes(None), _park_minutes(5.0)) == (0.0, 5.0)
+
+
+def test_a_run_the_campaign_file_now_configures_otherwise_is_not_resumed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from advgame.training import train
+
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(TINY)
+    out = tmp_path / "tiny"
+    config = load_campaign(spec).config("sac-s0")
+    run = out / "runs" / "sac-s0"
+    train(dataclasses.replace(config, iterations=1), run, progress=False)
+    saved = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({**saved, "iterations": 3}))
+    assert main(["campaign", str(spec), "--park"]) == 0  # a parked copy is checked the same way
+    spec.write_text(TINY.replace("learning_starts = 40", "learning_starts = 60"))
+    assert main(["campaign", str(spec), "--stage", "train", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "sac-s0 started with protagonist_hparams" in err and "learning_starts" in err
+    assert json.loads((run / "state.json").read_text())["iteration"] == 1  # nothing trained
+    spec.write_text(TINY)  # the file as the run started: it goes on
+    assert main(["campaign", str(spec), "--stage", "train", "--no-progress"]) == 0
+    assert (out / "finished" / "sac-s0").is_dir()

@@ -223,6 +223,7 @@ def run_campaign(
             _unpark(out, names)
             todo = [r for r in names if _progress(run_dir(out, r)) < campaign.config(r).iterations]
             todo = todo[:max_runs] if max_runs is not None else todo
+            _check_unchanged(campaign, out, todo)
             release(out, [r for r in mine if r not in todo])  # not trained here now: free them
             write_status(campaign, out, training=todo)
             if todo:
@@ -291,6 +292,41 @@ def _unpark(out: Path, names: Sequence[str]) -> None:
         if parked_iteration(parked) > _progress(out / "runs" / r):
             log.info("campaign: %s resumes from its parked copy in %s", r, parked)
             unpark_run(parked, out / "runs" / r)
+
+
+def _check_unchanged(campaign: Campaign, out: Path, names: Sequence[str]) -> None:
+    """Refuse to resume a run that the campaign file now configures otherwise.
+
+    A partial run (or its parked copy) resumes from its own ``config.json``; had the file since
+    changed what the run learns (a learner's setting, the task), the run would go on under the
+    old setting while its table row carries the new. The in-training evaluation's fields may
+    change (`advgame.training.conditions.EVAL_FIELDS`: they change nothing learned).
+    """
+    from dataclasses import fields, replace
+
+    from advgame.core.config import load_json
+    from advgame.training.conditions import EVAL_FIELDS
+    from advgame.training.config import TrainConfig
+
+    for r in names:
+        saved_path = out / "runs" / r / "config.json"
+        if not saved_path.is_file():
+            continue
+        want = campaign.config(r)
+        saved = replace(
+            load_json(TrainConfig, saved_path), **{f: getattr(want, f) for f in EVAL_FIELDS}
+        )
+        changed = [
+            f.name for f in fields(TrainConfig) if getattr(saved, f.name) != getattr(want, f.name)
+        ]
+        if changed:
+            name = changed[0]
+            raise ConfigError(
+                f"Run {r} started with {name} = {getattr(saved, name)!r}, but the campaign file now "
+                f"gives {getattr(want, name)!r} (changed: {', '.join(changed)}). To train it "
+                f"again under the file, move {saved_path.parent} and its parked copies away; to "
+                "go on as it started, restore the file."
+            )
 
 
 def park_campaign(
