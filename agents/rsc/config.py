@@ -78,7 +78,8 @@ class RSCConfig(_OffPolicyConfig):
 
     clip_to_support: bool = False
     """Clip each augmented next-state and reward dimension to the range of the world model's
-    training targets (ours; docs/causal.md, "RS-DoorCausal's RSC")."""
+    training targets (ours; docs/causal.md, "The door's first RSC run diverged"; the door
+    campaign sets it, the lift campaign's runs trained without it)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
