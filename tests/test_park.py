@@ -106,19 +106,27 @@ def _weights(run: Path) -> dict[str, np.ndarray]:
     return {k: v.numpy() for k, v in model.policy.state_dict().items()}
 
 
-def test_a_parked_run_resumes_in_a_fresh_checkout_as_the_run_itself_would(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    from advgame.training import resume, train
+def _stopped_run(tmp_path: Path, done: int) -> tuple[Path, Path, Path]:
+    """TINY's campaign file, its folder and its one run, trained `done` of its 3 iterations."""
+    from advgame.training import train
 
     spec = tmp_path / "tiny.toml"
     spec.write_text(TINY)
     out = tmp_path / "tiny"
     config = load_campaign(spec).config("sac-s0")
     run = out / "runs" / "sac-s0"
-    train(dataclasses.replace(config, iterations=2), run, progress=False)  # stopped after 2 of 3
+    train(dataclasses.replace(config, iterations=done), run, progress=False)  # stopped early
     saved = json.loads((run / "config.json").read_text())
     (run / "config.json").write_text(json.dumps({**saved, "iterations": 3}))
+    return spec, out, run
+
+
+def test_a_parked_run_resumes_in_a_fresh_checkout_as_the_run_itself_would(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from advgame.training import resume
+
+    spec, out, run = _stopped_run(tmp_path, 2)
     reference = tmp_path / "reference" / "sac-s0"
     shutil.copytree(run, reference)
 
@@ -236,16 +244,7 @@ def test_a_train_stage_with_park_every_leaves_a_parked_copy_when_it_is_killed(
 def test_a_run_the_campaign_file_now_configures_otherwise_is_not_resumed(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from advgame.training import train
-
-    spec = tmp_path / "tiny.toml"
-    spec.write_text(TINY)
-    out = tmp_path / "tiny"
-    config = load_campaign(spec).config("sac-s0")
-    run = out / "runs" / "sac-s0"
-    train(dataclasses.replace(config, iterations=1), run, progress=False)
-    saved = json.loads((run / "config.json").read_text())
-    (run / "config.json").write_text(json.dumps({**saved, "iterations": 3}))
+    spec, out, run = _stopped_run(tmp_path, 1)
     assert main(["campaign", str(spec), "--park"]) == 0  # a parked copy is checked the same way
     spec.write_text(TINY.replace("learning_starts = 40", "learning_starts = 60"))
     assert main(["campaign", str(spec), "--stage", "train", "--no-progress"]) == 2
