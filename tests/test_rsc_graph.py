@@ -1,4 +1,4 @@
-"""RSC's causal graph on systems whose true graph is known, and on the real RS-LiftCausal task.
+"""RSC's causal graph on systems whose true graph is known, and on the real causal tasks.
 
 `ColourPoint` has a point ``x`` moved by the action, a side ``s`` (continuous, fixed for the
 episode) and a colour ``c = sign(s)`` that goes with the side in every transition, as the cube's
@@ -138,13 +138,15 @@ def test_hard_draws_give_the_score_functions_gradient() -> None:
     assert float(nll.detach()) == pytest.approx(float(loss.sum(dim=1).mean()), rel=1e-5)
 
 
-def _lift_transitions(episodes: int = 4, steps: int = 100) -> tuple[th.Tensor, ...]:
-    """Random-action RS-LiftCausal transitions under the training correlation (its preset's
-    own workspace adversary sets the cube's side and colour at each reset)."""
+def _transitions(
+    scenario: str, preset: str, episodes: int = 4, steps: int = 100
+) -> tuple[th.Tensor, ...]:
+    """Random-action transitions of a causal task under a correlation (the preset's own
+    workspace adversary sets the features at each reset)."""
     import advgame
     from advgame.core.views import SingleAgentView
 
-    game = advgame.make("RS-LiftCausal", preset="spurious-xnr", max_episode_steps=steps)
+    game = advgame.make(scenario, preset=preset, max_episode_steps=steps)
     env = SingleAgentView(game, "protagonist", dict(game.preset.adversaries))
     env.action_space.seed(0)
     rows: list[tuple[np.ndarray, ...]] = []
@@ -167,7 +169,7 @@ def test_on_rs_liftcausal_the_colour_stays_the_colour_in_augmented_rows() -> Non
     state's colour is the augmented state's own (each channel 0 or 1, as in the data), not one
     fixed colour and not the one the cube's side would give."""
     th.manual_seed(0)
-    obs, actions, next_obs, rewards = _lift_transitions()
+    obs, actions, next_obs, rewards = _transitions("RS-LiftCausal", "spurious-xnr")
     colour = slice(obs.shape[1] - 3, obs.shape[1])  # object-state's last three: the cube's RGB
     assert set(obs[:, colour].unique().tolist()) == {0.0, 1.0}  # red and green both seen
     model = CausalWorldModel(obs.shape[1], actions.shape[1], hidden=16)
@@ -219,3 +221,24 @@ def test_a_world_model_saved_without_its_range_loads_and_clips_nothing() -> None
     free = th.cat(fresh.predict(obs, actions), dim=1)
     fresh.clip_to_support = True
     assert th.cat(fresh.predict(obs, actions), dim=1).equal(free)
+
+
+def test_on_rs_doorcausal_clipped_augmented_rows_stay_inside_the_datas_range() -> None:
+    """The door campaign's RSC (`clip_to_support`): on real RS-DoorCausal transitions every
+    augmented next state and reward lies inside the range of the data, where the unclipped
+    model's predictions leave it (joint accelerations, docs/causal.md)."""
+    th.manual_seed(0)
+    obs, actions, next_obs, rewards = _transitions("RS-DoorCausal", "spurious-hhl", 2, 100)
+    model = CausalWorldModel(obs.shape[1], actions.shape[1], hidden=16)
+    generator = np.random.default_rng(0)
+    for _ in range(300):
+        rows = th.as_tensor(generator.integers(0, len(obs), 128))
+        model.update(obs[rows], actions[rows], next_obs[rows], rewards[rows])
+    data = th.cat([next_obs, rewards.reshape(-1, 1)], dim=1)
+    low, high = data.min(0).values, data.max(0).values
+    states, _ = perturb_states(obs, len(obs))
+    free = th.cat(model.predict(states, actions), dim=1)
+    assert bool(((free < low) | (free > high)).any())
+    model.clip_to_support = True
+    clipped = th.cat(model.predict(states, actions), dim=1)
+    assert bool(((clipped >= low) & (clipped <= high)).all())
