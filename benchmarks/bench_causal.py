@@ -8,9 +8,12 @@ model and augmentation, which start after ``--warmup`` world-model updates here 
 timed steps are the campaign's steady state) and DBC (`advgame.agents.DBCConfig`). A variant
 ``rsc (F.gumbel_softmax)`` draws RSC's relaxed graphs with torch's two-class
 ``gumbel_softmax`` instead of the logistic-noise sigmoid `CausalWorldModel.sample_graph` uses
-(the same distribution), to show what that costs. Each model first takes ``--start`` random
-steps and ``--warmup`` learning steps, untimed (imports, robosuite's start and the warm-up
-are not in the rate), then ``--steps`` timed learning steps; rounds interleave the learners.
+(the same distribution), to show what that costs; ``rsc (th.bernoulli)`` draws the hard graphs (the
+campaigns' ``graph_draws``) with ``th.bernoulli`` in row-major layout, as RSC did before 7 Dec's
+session 40, instead of `CausalWorldModel.draw_graph`'s uniform draws laid out output-major. Each
+model first takes ``--start`` random steps and ``--warmup`` learning steps, untimed (imports,
+robosuite's start and the warm-up are not in the rate), then ``--steps`` timed learning steps;
+rounds interleave the learners.
 Printed: each task's raw protagonist step (random actions through the advgame view, no
 learner), learning steps per second (median over rounds), RSC's split of its wall time (world
 model, SAC step, the rest), and the calibration (a raw HalfCheetah-v5 step) before and after.
@@ -39,7 +42,7 @@ from advgame.core.views import view_factory
 
 PRESETS = {"RS-LiftCausal": "spurious-xnr", "RS-DoorCausal": "spurious-hhl"}
 """Each causal task and the training correlation its campaign uses."""
-KINDS = ("sac", "rsc", "rsc (F.gumbel_softmax)", "dbc")
+KINDS = ("sac", "rsc", "rsc (F.gumbel_softmax)", "rsc (th.bernoulli)", "dbc")
 
 
 def _gumbel_softmax_graph(model: Any) -> None:
@@ -54,6 +57,17 @@ def _gumbel_softmax_graph(model: Any) -> None:
         return F.gumbel_softmax(two, tau=world.temperature, hard=False, dim=-1)[..., 0]
 
     world.sample_graph = sample_graph
+
+
+def _bernoulli_graph(model: Any) -> None:
+    """Make `model`'s world model draw its hard graphs with ``th.bernoulli``, row-major."""
+    world = model.world_model
+
+    def draw_graph(rows: int) -> torch.Tensor:
+        probs = world.edge_probabilities().detach()
+        return torch.bernoulli(probs.expand(rows, *probs.shape))
+
+    world.draw_graph = draw_graph
 
 
 def _view(scenario: str) -> Any:
@@ -86,6 +100,8 @@ def _model(kind: str, scenario: str, start: int, warmup: int, seed: int) -> Any:
     model = config.make_model(venv, seed=seed, total_steps=10**6)
     if kind == "rsc (F.gumbel_softmax)":
         _gumbel_softmax_graph(model)
+    elif kind == "rsc (th.bernoulli)":
+        _bernoulli_graph(model)
     return model
 
 
