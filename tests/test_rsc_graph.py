@@ -128,8 +128,7 @@ def test_hard_draws_give_the_score_functions_gradient() -> None:
     nll.backward()
     got = model.graph_logits.grad.clone()
     th.random.set_rng_state(state)  # the same edge draws again
-    graph = model.draw_graph(64)
-    # the draws are Bernoulli(σ(φ)) edge by edge: their mean over rows is near the probability
+    graph = model.draw_graph(64)  # the loss's own draws, one graph per row
     assert graph.shape == (64, 3, 3)
     x = model.inputs.normalize(th.cat([obs, actions], dim=1))
     y = model.targets.normalize(th.cat([next_obs, rewards.reshape(-1, 1)], dim=1))
@@ -158,8 +157,8 @@ def test_hard_draws_are_bernoulli_and_the_batched_forward_is_per_row() -> None:
     for r in range(5):
         lone = model(x[r : r + 1], graph[r])
         assert th.allclose(rows[r], lone[0], atol=1e-6)
-    # the same numbers as each output's MLP written out (the form before 7 Dec's session 40, which the
-    # released RS-LiftCausal agents trained with)
+    # the same numbers as each output's MLP written out (the form before 7 Dec's session 40,
+    # which the released RS-LiftCausal agents trained with)
     masked = x.unsqueeze(1) * th.maximum(graph[:5], model.kept)
     h = th.relu(th.einsum("boi,oih->boh", masked, model.w1) + model.b1)
     h = th.relu(th.einsum("boh,ohk->bok", h, model.w2) + model.b2)
