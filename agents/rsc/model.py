@@ -199,8 +199,10 @@ class CausalWorldModel(nn.Module):
 
         Shape (rows, outputs, inputs), laid out output-major in memory (the transpose of a
         contiguous (outputs, rows, inputs) tensor), the layout `forward`'s batched products
-        take without a copy. A uniform draw below the edge's probability: Bernoulli draws at a
-        fraction of ``th.bernoulli``'s cost on the CPU (benchmarks/bench_causal.py,
+        take without a copy. A uniform draw below the edge's probability is a Bernoulli draw;
+        for a 128-row door batch (64 × 70 edges) the uniforms and the comparison took 3.2-4.7 ms
+        where ``th.bernoulli`` took 6.0 ms (torch's profiler, one thread, 7 Dec; in the whole
+        learner the difference was within that day's noise: benchmarks/bench_causal.py,
         ``rsc (th.bernoulli)``).
         """
         probs = self.edge_probabilities()
